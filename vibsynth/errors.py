@@ -1,0 +1,45 @@
+"""The one exception family of vibsynth.
+
+Every error that bad input can cause derives from :class:`VibsynthError`, so the
+command line and the servers catch one type, print one clear line and keep the
+last good state.
+"""
+from __future__ import annotations
+
+__all__ = [
+    "VibsynthError",
+    "ParameterError",
+    "InputError",
+    "ConfigError",
+    "PresetError",
+    "DeviceError",
+    "CodecError",
+]
+
+
+class VibsynthError(Exception):
+    """Base class of every error raised on purpose by vibsynth."""
+
+
+class ParameterError(VibsynthError, ValueError):
+    """A function or knob received a value outside its domain (NaN, range, shape)."""
+
+
+class InputError(VibsynthError):
+    """A recording or data file cannot be used (missing, unreadable, silent, too short)."""
+
+
+class ConfigError(VibsynthError):
+    """A configuration file or setting is invalid; the message names file, key and range."""
+
+
+class PresetError(VibsynthError):
+    """A preset file is invalid or a preset name is unknown."""
+
+
+class DeviceError(VibsynthError):
+    """An audio or MIDI device cannot be opened or has failed."""
+
+
+class CodecError(VibsynthError):
+    """An encoded parameter-trajectory file is corrupt, truncated or of an unknown version."""
