@@ -1,0 +1,5 @@
+import sys
+
+from vibsynth.cli import main
+
+sys.exit(main())

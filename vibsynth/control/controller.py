@@ -1,0 +1,322 @@
+"""The one entry point every control source uses: validate, remember, hand to the engine, notify.
+
+OSC, MIDI, preset hot reload and the command line all go through a
+:class:`Controller`, so a value is validated once, with one set of rules:
+
+* NaN or infinite numbers are rejected (:class:`~vibsynth.errors.ParameterError`).
+* intensity must lie in [0, 1]; balance within the configured live limits
+  (default [-3.5, 3.5]); glide within [0, ``glide_max_s``]. Values outside are
+  rejected with a message naming the range; nothing changes.
+* channel numbers are 0-based here (adapters translate from their own convention).
+
+The controller keeps the *target* state (the last value requested per channel,
+including scheduled ones) for queries and pushes every change to subscribers
+(e.g. OSC ``/notify`` clients). Its lock guards only this small state and is never
+taken by the audio thread.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, replace
+from typing import Callable, Iterable, Protocol, Sequence
+
+from vibsynth.engine.commands import KNOB_NAMES, Command, Panic, SetGlide, SetKnob, SetMute
+from vibsynth.errors import ParameterError, PresetError
+
+__all__ = [
+    "EngineLike",
+    "PresetLike",
+    "KnobLimits",
+    "ChannelState",
+    "KnobEvent",
+    "Controller",
+]
+
+
+class EngineLike(Protocol):
+    """What the controller needs of an engine (see :class:`vibsynth.engine.engine.Engine`)."""
+
+    channels: int
+    fs: float
+
+    def submit(self, command: Command) -> int: ...
+
+    @property
+    def applied_seq(self) -> int: ...
+
+    @property
+    def frame_position(self) -> int: ...
+
+
+class PresetLike(Protocol):
+    """What the controller needs of a preset (see :mod:`vibsynth.presets`)."""
+
+    name: str
+    intensity: float
+    balance: float
+    glide_ms: float | None
+
+
+@dataclass(frozen=True)
+class KnobLimits:
+    """Ranges accepted from live controls.
+
+    Attributes
+    ----------
+    balance_min, balance_max : float
+        Live balance range (knob units).
+    glide_max_s : float
+        Longest glide accepted.
+    """
+
+    balance_min: float = -3.5
+    balance_max: float = 3.5
+    glide_max_s: float = 10.0
+
+
+@dataclass(frozen=True)
+class ChannelState:
+    """Target state of one output channel."""
+
+    intensity: float = 0.0
+    balance: float = 0.0
+    glide_s: float = 0.02
+    muted: bool = False
+    preset: str | None = None
+
+
+@dataclass(frozen=True)
+class KnobEvent:
+    """A change pushed to subscribers: ``name`` in intensity, balance, glide, mute, preset."""
+
+    channel: int
+    name: str
+    value: float | str | bool | None
+    source: str
+
+
+Listener = Callable[[KnobEvent], None]
+
+
+def check_finite(name: str, value: float) -> float:
+    """Reject NaN/inf and non-numbers; return the value as float."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise ParameterError(f"{name} must be a finite number, got {value!r}")
+    return number
+
+
+def check_range(name: str, value: float, low: float, high: float) -> float:
+    """Reject a value outside [low, high] with a message naming the range."""
+    number = check_finite(name, value)
+    if not (low <= number <= high):
+        raise ParameterError(f"{name} {number:g} is outside the allowed range [{low:g}, {high:g}]")
+    return number
+
+
+class Controller:
+    """Validated, thread-safe control of an engine.
+
+    Parameters
+    ----------
+    engine : EngineLike
+    limits : KnobLimits
+    preset_resolver : callable, optional
+        ``name -> PresetLike``; raises :class:`~vibsynth.errors.PresetError` for unknown names.
+    initial_glide_s : float
+        Glide every channel starts with.
+    """
+
+    def __init__(
+        self,
+        engine: EngineLike,
+        *,
+        limits: KnobLimits = KnobLimits(),
+        preset_resolver: Callable[[str], PresetLike] | None = None,
+        initial_glide_s: float = 0.02,
+    ) -> None:
+        self.engine = engine
+        self.limits = limits
+        self.preset_resolver = preset_resolver
+        self._lock = threading.Lock()
+        self._state = [ChannelState(glide_s=initial_glide_s) for _ in range(engine.channels)]
+        self._listeners: list[Listener] = []
+        self._last_seq = 0
+        self.started_at = time.monotonic()
+        self.error_counts: dict[str, int] = {}
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def channels(self) -> int:
+        return self.engine.channels
+
+    def _channel_list(self, channels: Iterable[int] | None) -> tuple[int, ...]:
+        if channels is None:
+            return tuple(range(self.channels))
+        out = tuple(sorted(set(int(c) for c in channels)))
+        for c in out:
+            if not (0 <= c < self.channels):
+                raise ParameterError(f"channel {c + 1} does not exist (channels are 1..{self.channels})")
+        if not out:
+            raise ParameterError("no channel selected")
+        return out
+
+    def _engine_channels(self, chans: tuple[int, ...]) -> tuple[int, ...] | None:
+        return None if len(chans) == self.channels else chans
+
+    def _submit(self, command: Command) -> None:
+        seq = self.engine.submit(command)
+        self._last_seq = max(self._last_seq, seq)
+
+    def _update(self, chans: tuple[int, ...], field: str, value: object, source: str) -> None:
+        events = []
+        with self._lock:
+            for c in chans:
+                self._state[c] = replace(self._state[c], **{field: value})
+                events.append(KnobEvent(c, "mute" if field == "muted" else field if field != "glide_s" else "glide", value, source))
+            listeners = list(self._listeners)
+        for listener in listeners:
+            for event in events:
+                listener(event)
+
+    def count_error(self, kind: str) -> None:
+        """Count a rejected input (adapters call this; shown in status)."""
+        with self._lock:
+            self.error_counts[kind] = self.error_counts.get(kind, 0) + 1
+
+    # ------------------------------------------------------------------ knobs
+    def validate_knob(self, name: str, value: float) -> float:
+        """Check a knob value against its range; return it as float."""
+        if name == "intensity":
+            return check_range("intensity", value, 0.0, 1.0)
+        if name == "balance":
+            return check_range("balance", value, self.limits.balance_min, self.limits.balance_max)
+        raise ParameterError(f"unknown knob {name!r}; knobs are {', '.join(KNOB_NAMES)}")
+
+    def set_knob(
+        self,
+        name: str,
+        value: float,
+        *,
+        channels: Sequence[int] | None = None,
+        at_frame: int | None = None,
+        glide_s: float | None = None,
+        source: str = "api",
+    ) -> float:
+        """Move a knob (intensity 0..1 or balance) on channels, now or at a stream frame.
+
+        Returns
+        -------
+        value : float
+            The value applied.
+        """
+        number = self.validate_knob(name, value)
+        if glide_s is not None:
+            glide_s = check_range("glide", glide_s, 0.0, self.limits.glide_max_s)
+        chans = self._channel_list(channels)
+        self._submit(SetKnob(name, number, self._engine_channels(chans), at_frame, glide_s))  # type: ignore[arg-type]
+        self._update(chans, name, number, source)
+        return number
+
+    def set_texture(
+        self,
+        intensity: float,
+        balance: float,
+        *,
+        channels: Sequence[int] | None = None,
+        at_frame: int | None = None,
+        source: str = "api",
+    ) -> None:
+        """Set both knobs at once (both are validated before either changes)."""
+        self.validate_knob("intensity", intensity)
+        self.validate_knob("balance", balance)
+        self.set_knob("balance", balance, channels=channels, at_frame=at_frame, source=source)
+        self.set_knob("intensity", intensity, channels=channels, at_frame=at_frame, source=source)
+
+    def set_glide(
+        self, seconds: float, *, channels: Sequence[int] | None = None, at_frame: int | None = None, source: str = "api"
+    ) -> float:
+        """Set the glide time in seconds (0 = jump)."""
+        number = check_range("glide", seconds, 0.0, self.limits.glide_max_s)
+        chans = self._channel_list(channels)
+        self._submit(SetGlide(number, self._engine_channels(chans), at_frame))
+        self._update(chans, "glide_s", number, source)
+        return number
+
+    def set_mute(
+        self, muted: bool, *, channels: Sequence[int] | None = None, at_frame: int | None = None, source: str = "api"
+    ) -> None:
+        """Mute (short fade out) or unmute channels; knob targets are kept."""
+        chans = self._channel_list(channels)
+        self._submit(SetMute(bool(muted), self._engine_channels(chans), at_frame))
+        self._update(chans, "muted", bool(muted), source)
+
+    def panic(self, *, source: str = "api") -> None:
+        """Silence every channel now (intensity targets to 0, scheduled commands dropped)."""
+        self._submit(Panic())
+        self._update(tuple(range(self.channels)), "intensity", 0.0, source)
+
+    # ------------------------------------------------------------------ presets
+    def load_preset(
+        self, name: str, *, channels: Sequence[int] | None = None, at_frame: int | None = None, source: str = "api"
+    ) -> PresetLike:
+        """Glide channels to a preset's knobs (with the preset's glide, if it has one)."""
+        if self.preset_resolver is None:
+            raise PresetError("no preset library is loaded")
+        preset = self.preset_resolver(name)
+        chans = self._channel_list(channels)
+        glide = None if preset.glide_ms is None else preset.glide_ms / 1000.0
+        self.set_knob("balance", preset.balance, channels=chans, at_frame=at_frame, glide_s=glide, source=source)
+        self.set_knob("intensity", preset.intensity, channels=chans, at_frame=at_frame, glide_s=glide, source=source)
+        self._update(chans, "preset", preset.name, source)
+        return preset
+
+    def reapply_preset(self, name: str, *, source: str = "reload") -> tuple[int, ...]:
+        """Re-apply a (changed) preset on every channel currently playing it; returns those channels."""
+        with self._lock:
+            chans = tuple(c for c, s in enumerate(self._state) if s.preset == name)
+        if chans:
+            self.load_preset(name, channels=chans, source=source)
+        return chans
+
+    # ------------------------------------------------------------------ queries
+    def state(self) -> tuple[ChannelState, ...]:
+        """Target state of every channel (a snapshot)."""
+        with self._lock:
+            return tuple(self._state)
+
+    def get(self, name: str, channel: int = 0) -> float | bool | str | None:
+        """One value of one channel: intensity, balance, glide (s), mute, preset."""
+        state = self.state()[self._channel_list([channel])[0]]
+        fields = {"intensity": state.intensity, "balance": state.balance, "glide": state.glide_s,
+                  "mute": state.muted, "preset": state.preset}
+        if name not in fields:
+            raise ParameterError(f"unknown setting {name!r}; known: {', '.join(fields)}")
+        return fields[name]
+
+    def subscribe(self, listener: Listener) -> Callable[[], None]:
+        """Call ``listener(event)`` on every change, from the thread making it; returns an unsubscribe function."""
+        with self._lock:
+            self._listeners.append(listener)
+
+        def unsubscribe() -> None:
+            with self._lock:
+                if listener in self._listeners:
+                    self._listeners.remove(listener)
+
+        return unsubscribe
+
+    def sync(self, timeout_s: float = 2.0) -> bool:
+        """Wait until the engine applied every command submitted so far (True) or the timeout passed."""
+        target = self._last_seq
+        deadline = time.monotonic() + timeout_s
+        while self.engine.applied_seq < target:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.0005)
+        return True
