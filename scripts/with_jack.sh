@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Run a command with a private JACK server on the dummy driver (real-time paced, no sound card).
+#   scripts/with_jack.sh [--rate HZ] [--period FRAMES] -- COMMAND...
+# The server gets a unique name (JACK_DEFAULT_SERVER), so several runs can coexist;
+# it is stopped only after COMMAND has exited (PortAudio aborts if JACK vanishes under it).
+set -u
+rate=48000; period=128
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --rate) rate=$2; shift 2;;
+    --period) period=$2; shift 2;;
+    --) shift; break;;
+    *) break;;
+  esac
+done
+export JACK_DEFAULT_SERVER="vibsynth-$$"
+export JACK_NO_AUDIO_RESERVATION=1
+jackd -n "$JACK_DEFAULT_SERVER" -R -d dummy -r "$rate" -p "$period" >"/tmp/jackd-$JACK_DEFAULT_SERVER.log" 2>&1 &
+jack_pid=$!
+if ! jack_wait -w -t 10 >/dev/null 2>&1; then
+  # Without real-time privileges jackd -R can fail: fall back to a non-RT server.
+  kill "$jack_pid" 2>/dev/null; wait "$jack_pid" 2>/dev/null
+  jackd -n "$JACK_DEFAULT_SERVER" -d dummy -r "$rate" -p "$period" >"/tmp/jackd-$JACK_DEFAULT_SERVER.log" 2>&1 &
+  jack_pid=$!
+  if ! jack_wait -w -t 10 >/dev/null 2>&1; then
+    echo "with_jack.sh: jackd did not start; log:" >&2; cat "/tmp/jackd-$JACK_DEFAULT_SERVER.log" >&2
+    kill "$jack_pid" 2>/dev/null; exit 1
+  fi
+fi
+export VIBSYNTH_JACK_RATE=$rate VIBSYNTH_JACK_PERIOD=$period
+"$@"
+status=$?
+kill "$jack_pid" 2>/dev/null; wait "$jack_pid" 2>/dev/null
+exit $status
