@@ -1,56 +1,801 @@
-"""Configuration: layered YAML (minimal version; full validation and layering in issue 6).
+"""Configuration: a validated, layered YAML tree with the origin of every value.
+
+Layers, lowest first (a later layer overrides single keys of an earlier one):
+
+1. built-in defaults: the package file ``vibsynth/data/config/default.yaml``
+   (``config/default.yaml`` at the repository root is a symlink to it: one source);
+2. the user config file: ``path`` (``--config``), else ``$VIBSYNTH_CONFIG``, else
+   ``config.yaml`` in the platform config folder (see :func:`user_config_file`), if it exists;
+3. environment variables for per-run settings (:data:`ENV_VARS`);
+4. command-line overrides (``overrides``: nested or dotted keys).
+
+Every leaf key is validated (type, range, allowed values; unknown keys are errors).
+Errors raise :class:`~vibsynth.errors.ConfigError` with a message naming the file,
+the line, the key, the value and what is allowed, e.g.::
+
+    my.yaml:7: audio.rate = 100: outside the allowed range [2400, 384000] (Hz)
 
 API contract used by the rest of the package:
 
 * ``load_config(path=None, *, overrides=None) -> Config``
 * ``Config.data``: nested dict with every key of ``vibsynth/data/config/default.yaml``
-* ``Config.section(name) -> dict``
+* ``Config.section(name) -> dict``; ``Config.get("audio.rate")``
+* ``Config.sources``: dotted key -> where its value came from
+* ``resolve_actuator_response(config) -> list[(hz, db)]``
 """
 from __future__ import annotations
 
 import copy
+import ipaddress
+import math
+import os
+import re
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import yaml
 
 from vibsynth.errors import ConfigError
 
-__all__ = ["Config", "load_config", "default_config_data"]
+__all__ = [
+    "Config",
+    "YamlDocument",
+    "load_config",
+    "default_config_data",
+    "parse_yaml",
+    "check_config_file",
+    "user_config_file",
+    "ENV_VARS",
+    "SCHEMA",
+    "DEFAULT_CONFIG_RESOURCE",
+    "actuator_profiles",
+    "load_actuator_profile",
+    "resolve_actuator_response",
+]
+
+DEFAULT_CONFIG_RESOURCE = "config/default.yaml"
+CONFIG_VERSION = 1
+APP_NAME = "vibsynth"
+
+#: Environment variables (per-run settings) -> dotted config key.
+ENV_VARS: dict[str, str] = {
+    "VIBSYNTH_OUTPUT": "audio.backend",
+    "VIBSYNTH_DEVICE": "audio.device",
+    "VIBSYNTH_HOST_API": "audio.host_api",
+    "VIBSYNTH_RATE": "audio.rate",
+    "VIBSYNTH_CHANNELS": "audio.channels",
+    "VIBSYNTH_OSC_HOST": "osc.host",
+    "VIBSYNTH_OSC_PORT": "osc.port",
+    "VIBSYNTH_MIDI_PORT": "midi.port",
+    "VIBSYNTH_PRESETS_DIR": "presets.user_dir",
+}
+#: Environment variable naming the user config file (``--config`` wins over it).
+CONFIG_ENV_VAR = "VIBSYNTH_CONFIG"
 
 
-def default_config_data() -> dict[str, Any]:
-    text = resources.files("vibsynth.data").joinpath("config/default.yaml").read_text(encoding="utf-8")
-    return yaml.safe_load(text)
-
-
-def _merge(base: dict[str, Any], extra: Mapping[str, Any]) -> None:
-    for key, value in extra.items():
-        if isinstance(value, Mapping) and isinstance(base.get(key), dict):
-            _merge(base[key], value)
-        else:
-            base[key] = copy.deepcopy(value)
+# --------------------------------------------------------------------------- YAML with line numbers
+Path_ = tuple[str, ...]
 
 
 @dataclass
+class YamlDocument:
+    """A parsed YAML document with the line of every key.
+
+    Attributes
+    ----------
+    data : Any
+        The constructed document (``None`` for an empty file).
+    lines : dict of tuple of str to int
+        1-based line of each mapping key / sequence item, by path (keys as strings,
+        sequence indices as decimal strings).
+    origin : str
+        File name (or description) used in messages.
+    """
+
+    data: Any
+    lines: dict[Path_, int]
+    origin: str
+
+    def where(self, path: Path_) -> str:
+        """``origin:line`` of the deepest known prefix of ``path`` (``origin`` alone if unknown)."""
+        for n in range(len(path), 0, -1):
+            line = self.lines.get(tuple(str(p) for p in path[:n]))
+            if line is not None:
+                return f"{self.origin}:{line}"
+        return self.origin
+
+
+def _walk_lines(node: yaml.Node, path: Path_, lines: dict[Path_, int], origin: str) -> None:
+    if isinstance(node, yaml.MappingNode):
+        seen: dict[str, int] = {}
+        for key_node, value_node in node.value:
+            key = str(key_node.value)
+            line = key_node.start_mark.line + 1
+            if key in seen:
+                raise ConfigError(
+                    f"{origin}:{line}: key {'.'.join(path + (key,))!r} appears twice (first on line {seen[key]}); "
+                    "keep one"
+                )
+            seen[key] = line
+            lines[path + (key,)] = line
+            _walk_lines(value_node, path + (key,), lines, origin)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            lines[path + (str(i),)] = item.start_mark.line + 1
+            _walk_lines(item, path + (str(i),), lines, origin)
+
+
+def parse_yaml(text: str, origin: str, *, error: type[Exception] = ConfigError) -> YamlDocument:
+    """Parse YAML text, keeping the line of every key; duplicate keys are errors.
+
+    Parameters
+    ----------
+    text : str
+    origin : str
+        File name for messages.
+    error : exception class
+        Raised (with ``origin:line:`` in the message) on syntax errors and duplicate keys.
+
+    Returns
+    -------
+    document : YamlDocument
+    """
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        lines: dict[Path_, int] = {}
+        if node is None:
+            return YamlDocument(None, lines, origin)
+        try:
+            _walk_lines(node, (), lines, origin)
+        except ConfigError as exc:
+            raise error(str(exc)) from None
+        data = loader.construct_document(node)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        place = f"{origin}:{mark.line + 1}:{mark.column + 1}" if mark else origin
+        problem = " ".join(p for p in (exc.context, exc.problem) if p)
+        raise error(f"{place}: YAML syntax error: {problem}") from None
+    except yaml.YAMLError as exc:
+        raise error(f"{origin}: YAML error: {exc}") from None
+    finally:
+        loader.dispose()
+    return YamlDocument(data, lines, origin)
+
+
+def read_yaml_file(path: str | os.PathLike[str], *, error: type[Exception] = ConfigError) -> YamlDocument:
+    """Read and parse a YAML file (see :func:`parse_yaml`); missing/unreadable files raise ``error``."""
+    p = Path(path).expanduser()
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise error(f"{p}: is a folder, expected a YAML file") from None
+    except UnicodeDecodeError:
+        raise error(f"{p}: not a UTF-8 text file") from None
+    except OSError as exc:
+        raise error(f"{p}: cannot read ({exc.strerror})") from None
+    return parse_yaml(text, str(p), error=error)
+
+
+# --------------------------------------------------------------------------- field specs
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, float) and value.is_integer() and abs(value) < 1e15:
+        return repr(value)
+    return repr(value) if isinstance(value, str) else str(value) if value is None or _is_number(value) else repr(value)
+
+
+@dataclass(frozen=True)
+class Spec:
+    """How one leaf value is checked.
+
+    ``check(value)`` returns ``None`` when valid, else a short reason; ``allowed``
+    describes the legal values for messages and docs.
+    """
+
+    allowed: str
+    check: Callable[[Any], str | None]
+    doc: str = ""
+
+
+def number(low: float | None = None, high: float | None = None, *, integer: bool = False, nullable: bool = False,
+           low_open: bool = False, unit: str = "", doc: str = "") -> Spec:
+    """A number (int or float; bool refused) within [low, high] (``low_open``: (low, high])."""
+    kind = "an integer" if integer else "a number"
+    lo = "(" if low_open else "["
+    rng = f"{lo}{'-inf' if low is None else f'{low:g}'}, {'inf' if high is None else f'{high:g}'}]"
+    allowed = f"{kind} in {rng}" + (f" {unit}" if unit else "") + (" or null" if nullable else "")
+
+    def check(value: Any) -> str | None:
+        if value is None:
+            return None if nullable else "must not be null"
+        if not _is_number(value) or (integer and not float(value).is_integer()):
+            return f"must be {kind}"
+        if not math.isfinite(float(value)):
+            return "must be finite"
+        v = float(value)
+        if (low is not None and (v < low or (low_open and v == low))) or (high is not None and v > high):
+            return f"outside the allowed range {rng}" + (f" {unit}" if unit else "")
+        return None
+
+    return Spec(allowed, check, doc)
+
+
+def boolean(doc: str = "") -> Spec:
+    return Spec("true or false", lambda v: None if isinstance(v, bool) else "must be true or false", doc)
+
+
+def choice(*values: Any, nullable: bool = False, doc: str = "") -> Spec:
+    allowed = "one of " + ", ".join(str(v) for v in values) + (" or null" if nullable else "")
+
+    def check(value: Any) -> str | None:
+        if value is None and nullable:
+            return None
+        return None if value in values and not isinstance(value, bool) else "not an allowed value"
+
+    return Spec(allowed, check, doc)
+
+
+def string(*, nullable: bool = False, pattern: str | None = None, what: str = "a string", doc: str = "") -> Spec:
+    allowed = what + (" or null" if nullable else "")
+
+    def check(value: Any) -> str | None:
+        if value is None:
+            return None if nullable else "must not be null"
+        if not isinstance(value, str):
+            return f"must be {what}"
+        if pattern is not None and not re.fullmatch(pattern, value):
+            return f"must be {what}"
+        return None
+
+    return Spec(allowed, check, doc)
+
+
+def any_of(*specs: Spec, doc: str = "") -> Spec:
+    allowed = " or ".join(s.allowed for s in specs)
+
+    def check(value: Any) -> str | None:
+        reasons = [s.check(value) for s in specs]
+        if any(r is None for r in reasons):
+            return None
+        return next((r for r in reasons if r and "outside" in r), "not an allowed value")
+
+    return Spec(allowed, check, doc)
+
+
+def _points(x_name: str, x_low: float, x_low_open: bool, y_low: float, y_high: float, min_points: int,
+            nullable: bool, doc: str) -> Spec:
+    lo = "(" if x_low_open else "["
+    allowed = (f"a list of at least {min_points} pairs [{x_name}, value] with {x_name} in {lo}{x_low:g}, inf) "
+               f"strictly increasing and value in [{y_low:g}, {y_high:g}]" + (", or null" if nullable else ""))
+
+    def check(value: Any) -> str | None:
+        if value is None:
+            return None if nullable else "must not be null"
+        if not isinstance(value, list):
+            return "must be a list of pairs"
+        if len(value) < min_points:
+            return f"needs at least {min_points} points"
+        previous = None
+        for i, point in enumerate(value):
+            if not (isinstance(point, list) and len(point) == 2 and all(_is_number(v) for v in point)):
+                return f"item {i} ({point!r}) is not a pair of numbers"
+            x, y = float(point[0]), float(point[1])
+            if not (math.isfinite(x) and math.isfinite(y)):
+                return f"item {i} ({point!r}) is not finite"
+            if x < x_low or (x_low_open and x == x_low):
+                return f"item {i}: {x_name} {x:g} is outside {lo}{x_low:g}, inf)"
+            if not y_low <= y <= y_high:
+                return f"item {i}: value {y:g} is outside [{y_low:g}, {y_high:g}]"
+            if previous is not None and x <= previous:
+                return f"item {i}: {x_name} {x:g} does not increase (previous {previous:g})"
+            previous = x
+        return None
+
+    return Spec(allowed, check, doc)
+
+
+def _channel_list(value: Any) -> str | None:
+    if value is None:
+        return None
+    if not isinstance(value, list) or not value:
+        return "must be a non-empty list of device outputs (1-based integers)"
+    if not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value):
+        return "every entry must be an integer >= 1 (device outputs are 1-based)"
+    if len(set(value)) != len(value):
+        return "lists a device output twice"
+    return None
+
+
+def _addresses(value: Any) -> str | None:
+    if not isinstance(value, list):
+        return "must be a list of IP addresses or networks"
+    for i, item in enumerate(value):
+        try:
+            ipaddress.ip_network(str(item), strict=False)
+        except ValueError:
+            return f"item {i} ({item!r}) is not an IP address or network (e.g. 192.168.1.0/24)"
+        if not isinstance(item, str):
+            return f"item {i} ({item!r}) must be a quoted string"
+    return None
+
+
+def _midi_channel_map(value: Any) -> str | None:
+    if not isinstance(value, dict) or not value:
+        return "must be a mapping {MIDI channel 1-16: 'all' or [actuator channels]}"
+    for key, target in value.items():
+        if not (isinstance(key, int) and not isinstance(key, bool) and 1 <= key <= 16):
+            return f"key {key!r} is not a MIDI channel 1..16"
+        if target == "all":
+            continue
+        if not (isinstance(target, list) and target
+                and all(isinstance(t, int) and not isinstance(t, bool) and t >= 1 for t in target)):
+            return f"channel {key}: {target!r} must be 'all' or a list of actuator channels (1-based)"
+    return None
+
+
+_BINDING_KEYS = {"cc": (0, 127), "channel": (1, 16)}
+
+
+def _midi_bindings(value: Any) -> str | None:
+    if not isinstance(value, list):
+        return "must be a list of bindings like {cc: 74}"
+    for i, item in enumerate(value):
+        if not isinstance(item, dict) or "cc" not in item:
+            return f"item {i} ({item!r}) must be a mapping with a cc number, e.g. {{cc: 74}}"
+        for key, val in item.items():
+            if key == "invert":
+                if not isinstance(val, bool):
+                    return f"item {i}: invert must be true or false"
+                continue
+            if key not in _BINDING_KEYS:
+                return f"item {i}: unknown key {key!r} (allowed: cc, channel, invert)"
+            lo, hi = _BINDING_KEYS[key]
+            if not (isinstance(val, int) and not isinstance(val, bool) and lo <= val <= hi):
+                return f"item {i}: {key} {val!r} is outside [{lo}, {hi}]"
+    return None
+
+
+def custom(allowed: str, fn: Callable[[Any], str | None], doc: str = "") -> Spec:
+    return Spec(allowed, fn, doc)
+
+
+_PROFILE_NAME = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
+
+#: Every leaf key of the configuration and how it is validated (docs/config.md lists them).
+SCHEMA: dict[str, Spec] = {
+    "version": number(1, 1, integer=True, doc="config schema version"),
+    # audio
+    "audio.backend": choice("auto", "sounddevice", "null", "wav"),
+    "audio.device": any_of(string(nullable=True, what="a device name substring"),
+                           number(0, None, integer=True, doc="device index")),
+    "audio.host_api": string(nullable=True, what="a host API name"),
+    "audio.rate": number(2400, 384000, integer=True, unit="Hz"),
+    "audio.block_size": number(16, 8192, integer=True, unit="frames"),
+    "audio.latency": any_of(choice("low", "high"), number(0, 2, low_open=True, unit="s")),
+    "audio.channels": number(1, 64, integer=True),
+    "audio.channel_map": custom("null or a list of distinct device outputs (1-based), one per channel",
+                                _channel_list),
+    # bank
+    "bank.balance_min": number(-10, 0, unit="(knob units)"),
+    "bank.balance_max": number(0, 10, unit="(knob units)"),
+    "bank.levels": number(2, 1001, integer=True),
+    "bank.loop_seconds": number(0.5, 60, unit="s"),
+    "bank.cache_dir": string(nullable=True, what="a folder path (\"\" disables the cache)"),
+    "bank.seed": number(0, 2**32 - 1, integer=True),
+    # knobs
+    "knobs.ceiling_db": number(-120, 0, unit="dB"),
+    "knobs.range_db": number(0, 120, low_open=True, unit="dB"),
+    "knobs.glide_ms": number(0, 10000, unit="ms"),
+    "knobs.mute_fade_ms": number(0, 1000, unit="ms"),
+    "knobs.limiter_ceiling": number(0, 1, low_open=True, unit="(full scale)"),
+    "knobs.balance_min": number(-10, 0, unit="(knob units)"),
+    "knobs.balance_max": number(0, 10, unit="(knob units)"),
+    "knobs.initial_intensity": number(0, 1),
+    "knobs.initial_balance": number(-10, 10, unit="(knob units)"),
+    # actuator
+    "actuator.profile": string(nullable=True, pattern=_PROFILE_NAME, what="a profile name"),
+    "actuator.response": _points("Hz", 0, True, -60, 60, 1, True, "explicit response points"),
+    "actuator.max_boost_db": number(0, 40, unit="dB"),
+    # osc
+    "osc.enabled": boolean(),
+    "osc.host": string(pattern=r"\S+", what="a host name or IP address"),
+    "osc.port": number(0, 65535, integer=True, doc="0 = any free port"),
+    "osc.prefix": string(pattern=r"(/[A-Za-z0-9_.\-]+)+", what="an OSC address like /vibsynth (no trailing /)"),
+    "osc.allow": custom("a list of IP addresses or networks, e.g. ['127.0.0.1', '192.168.1.0/24']",
+                        _addresses),
+    "osc.reply_port": number(1, 65535, integer=True, nullable=True),
+    "osc.schedule_horizon_s": number(0, 3600, low_open=True, unit="s"),
+    "osc.notify_rate_hz": number(0, 1000, low_open=True, unit="Hz"),
+    "osc.tcp": boolean(),
+    # midi
+    "midi.enabled": boolean(),
+    "midi.port": any_of(string(nullable=True, what="a port name substring"), number(0, None, integer=True)),
+    "midi.virtual": boolean(),
+    "midi.mode": choice("gate", "continuous"),
+    "midi.release_ms": number(0, 10000, unit="ms"),
+    "midi.velocity_curve": number(0.1, 10),
+    "midi.pitch_bend_range": number(0, 8, unit="(knob units)"),
+    "midi.channel_map": custom("a mapping {MIDI channel 1-16: 'all' or [actuator channels, 1-based]}",
+                               _midi_channel_map),
+    "midi.mpe": boolean(),
+    "midi.mapping.intensity": custom("a list of bindings like {cc: 11} (cc 0-127, optional channel 1-16, "
+                                     "optional invert)", _midi_bindings),
+    "midi.mapping.balance": custom("a list of bindings like {cc: 74} (cc 0-127, optional channel 1-16, "
+                                   "optional invert)", _midi_bindings),
+    # speed
+    "speed.curve": _points("mm/s", 0, False, 0, 1, 2, False, "speed -> intensity"),
+    "speed.balance_per_decade": number(-4, 4, unit="(knob units per decade)"),
+    # presets
+    "presets.user_dir": string(nullable=True, what="a folder path"),
+    "presets.watch": boolean(),
+}
+
+_SECTIONS = {k.rsplit(".", 1)[0] for k in SCHEMA if "." in k}
+_SECTIONS |= {".".join(k.split(".")[:i]) for k in SCHEMA for i in range(1, k.count(".") + 1)}
+
+
+# --------------------------------------------------------------------------- defaults and merging
+def default_config_text() -> str:
+    """Text of the built-in default config (package data)."""
+    return resources.files("vibsynth.data").joinpath(DEFAULT_CONFIG_RESOURCE).read_text(encoding="utf-8")
+
+
+def default_config_data() -> dict[str, Any]:
+    """The built-in defaults as a nested dict."""
+    return parse_yaml(default_config_text(), "vibsynth/data/" + DEFAULT_CONFIG_RESOURCE).data
+
+
+def _leaves(data: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Dotted leaf keys of a nested dict, as defined by :data:`SCHEMA` (unknown nested dicts are walked)."""
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        dotted = f"{prefix}{key}"
+        if dotted not in SCHEMA and isinstance(value, dict):
+            out.update(_leaves(value, dotted + "."))
+        else:
+            out[dotted] = value
+    return out
+
+
+def _set(data: dict[str, Any], dotted: str, value: Any) -> None:
+    node = data
+    parts = dotted.split(".")
+    for part in parts[:-1]:
+        node = node.setdefault(part, {})
+    node[parts[-1]] = copy.deepcopy(value)
+
+
+def _close(key: str, candidates: list[str]) -> str:
+    import difflib
+
+    near = difflib.get_close_matches(key, candidates, n=3, cutoff=0.6)
+    return f"; did you mean {', '.join(near)}?" if near else ""
+
+
+def _validate_layer(values: Mapping[str, Any], where: Callable[[str], str], *, what: str = "key") -> None:
+    """Check each dotted leaf of one layer; ``where(dotted)`` gives ``file:line`` for messages."""
+    for dotted, value in values.items():
+        spec = SCHEMA.get(dotted)
+        if spec is None:
+            if dotted in _SECTIONS:
+                raise ConfigError(f"{where(dotted)}: {dotted} must be a section (a mapping of keys), got {_fmt(value)}")
+            parent = dotted.rsplit(".", 1)[0] if "." in dotted else ""
+            known = sorted(k.rsplit(".", 1)[-1] for k in SCHEMA if k.startswith(parent + ".")) if parent else \
+                sorted({k.split(".")[0] for k in SCHEMA})
+            raise ConfigError(
+                f"{where(dotted)}: unknown {what} {dotted!r}{_close(dotted, list(SCHEMA))} "
+                f"(allowed {'in ' + parent if parent else 'sections'}: {', '.join(known)})"
+            )
+        reason = spec.check(value)
+        if reason is not None:
+            raise ConfigError(f"{where(dotted)}: {dotted} = {_fmt(value)}: {reason} (allowed: {spec.allowed})")
+
+
+def _check_sections(data: Any, doc: YamlDocument, prefix: Path_ = ()) -> None:
+    """Top level and sections must be mappings."""
+    if not isinstance(data, dict):
+        name = ".".join(prefix) or "the file"
+        raise ConfigError(f"{doc.where(prefix)}: {name} must be a mapping of keys, got {_fmt(data)}")
+    for key, value in data.items():
+        dotted = ".".join(prefix + (str(key),))
+        if dotted in _SECTIONS and dotted not in SCHEMA:
+            if value is None:
+                data[key] = {}
+                continue
+            _check_sections(value, doc, prefix + (str(key),))
+
+
+# --------------------------------------------------------------------------- cross-field rules
+def _cross_check(data: Mapping[str, Any], sources: Mapping[str, str]) -> None:
+    def fail(key: str, message: str) -> None:
+        raise ConfigError(f"{sources.get(key, 'config')}: {message}")
+
+    audio, bank, knobs = data["audio"], data["bank"], data["knobs"]
+    if audio["channel_map"] is not None and len(audio["channel_map"]) != audio["channels"]:
+        fail("audio.channel_map", f"audio.channel_map = {audio['channel_map']}: has {len(audio['channel_map'])} "
+             f"entries but audio.channels = {audio['channels']} (allowed: one device output per channel)")
+    if bank["balance_min"] >= bank["balance_max"]:
+        fail("bank.balance_max", f"bank.balance_max = {bank['balance_max']} must be above bank.balance_min = "
+             f"{bank['balance_min']}")
+    if knobs["balance_min"] >= knobs["balance_max"]:
+        fail("knobs.balance_max", f"knobs.balance_max = {knobs['balance_max']} must be above knobs.balance_min = "
+             f"{knobs['balance_min']}")
+    if knobs["balance_min"] < bank["balance_min"] or knobs["balance_max"] > bank["balance_max"]:
+        key = "knobs.balance_min" if knobs["balance_min"] < bank["balance_min"] else "knobs.balance_max"
+        fail(key, f"live balance range [{knobs['balance_min']:g}, {knobs['balance_max']:g}] (knobs) must lie "
+             f"within the bank's grid [{bank['balance_min']:g}, {bank['balance_max']:g}] (bank.balance_min/max)")
+    if not knobs["balance_min"] <= knobs["initial_balance"] <= knobs["balance_max"]:
+        fail("knobs.initial_balance", f"knobs.initial_balance = {knobs['initial_balance']}: outside the live range "
+             f"[{knobs['balance_min']:g}, {knobs['balance_max']:g}] (knobs.balance_min/max)")
+    channels = audio["channels"]
+    for midi_channel, target in data["midi"]["channel_map"].items():
+        if isinstance(target, list) and max(target) > channels:
+            fail("midi.channel_map", f"midi.channel_map = {data['midi']['channel_map']}: MIDI channel {midi_channel} "
+                 f"targets actuator channel {max(target)} but audio.channels = {channels} (allowed: 1..{channels})")
+    profile = data["actuator"]["profile"]
+    if profile is not None and data["actuator"]["response"] is None:
+        names = actuator_profiles()
+        if profile not in names:
+            fail("actuator.profile", f"actuator.profile = {profile!r}: no such profile (allowed: "
+                 f"{', '.join(sorted(names)) or 'none found'}, or null; user profiles go in {user_profile_dir()})")
+
+
+# --------------------------------------------------------------------------- Config
+@dataclass
 class Config:
+    """The effective configuration.
+
+    Attributes
+    ----------
+    data : dict
+        Nested dict with every key of the default config.
+    sources : dict of str to str
+        Dotted leaf key -> where its value came from (``file:line``, ``env VAR``, ``command line``).
+    files : list of str
+        Config files read, lowest layer first.
+    """
+
     data: dict[str, Any]
     sources: dict[str, str] = field(default_factory=dict)
+    files: list[str] = field(default_factory=list)
 
     def section(self, name: str) -> dict[str, Any]:
-        return self.data[name]
-
-
-def load_config(path: str | Path | None = None, *, overrides: Mapping[str, Any] | None = None) -> Config:
-    data = default_config_data()
-    if path is not None:
+        """One top-level section (e.g. ``"audio"``)."""
         try:
-            user = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
-        except (OSError, yaml.YAMLError) as exc:
-            raise ConfigError(f"{path}: {exc}") from None
-        _merge(data, user)
+            return self.data[name]
+        except KeyError:
+            raise ConfigError(f"unknown config section {name!r}; sections: {', '.join(self.data)}") from None
+
+    def get(self, dotted: str) -> Any:
+        """A value by dotted key, e.g. ``config.get("osc.port")``."""
+        node: Any = self.data
+        for part in dotted.split("."):
+            if not isinstance(node, dict) or part not in node:
+                raise ConfigError(f"unknown config key {dotted!r}{_close(dotted, list(SCHEMA))}")
+            node = node[part]
+        return node
+
+    def leaves(self) -> dict[str, Any]:
+        """Every dotted leaf key and its value, in file order."""
+        return _leaves(self.data)
+
+
+def user_config_file() -> Path:
+    """The platform user config file (``config.yaml`` in the platform config folder).
+
+    Linux: ``~/.config/vibsynth/config.yaml`` (``$XDG_CONFIG_HOME``); macOS:
+    ``~/Library/Application Support/vibsynth/config.yaml``; Windows:
+    ``%LOCALAPPDATA%\\vibsynth\\config.yaml``.
+    """
+    import platformdirs
+
+    return Path(platformdirs.user_config_dir(APP_NAME, appauthor=False)) / "config.yaml"
+
+
+def _parse_env_value(name: str, text: str) -> Any:
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    return text if isinstance(value, (dict, list)) else value
+
+
+def _apply_layer(data: dict[str, Any], sources: dict[str, str], values: Mapping[str, Any], source: Callable[[str], str]) -> None:
+    for dotted, value in values.items():
+        _set(data, dotted, value)
+        sources[dotted] = source(dotted)
+
+
+def _file_layer(doc: YamlDocument) -> dict[str, Any]:
+    if doc.data is None:
+        return {}
+    _check_sections(doc.data, doc)
+    values = _leaves(doc.data)
+    version = values.get("version", CONFIG_VERSION)
+    if _is_number(version) and version > CONFIG_VERSION:
+        raise ConfigError(f"{doc.where(('version',))}: version = {version}: written for a newer vibsynth "
+                          f"(this one reads version {CONFIG_VERSION})")
+    _validate_layer(values, lambda k: doc.where(tuple(k.split("."))))
+    return values
+
+
+def _override_layer(overrides: Mapping[str, Any]) -> dict[str, Any]:
+    values: dict[str, Any] = {}
+    for key, value in overrides.items():
+        if isinstance(value, Mapping) and key not in SCHEMA:
+            for sub, v in _leaves(dict(value), f"{key}.").items():
+                values[sub] = v
+        else:
+            values[key] = value
+    _validate_layer(values, lambda k: "command line")
+    return values
+
+
+def load_config(
+    path: str | os.PathLike[str] | None = None,
+    *,
+    overrides: Mapping[str, Any] | None = None,
+    env: Mapping[str, str] | None = None,
+    user_file: bool = True,
+) -> Config:
+    """Load the effective configuration (defaults < user file < environment < overrides).
+
+    Parameters
+    ----------
+    path : path-like, optional
+        User config file (``--config``). Default: ``$VIBSYNTH_CONFIG``, else the
+        platform file (:func:`user_config_file`) if it exists.
+    overrides : mapping, optional
+        Command-line values: nested (``{"audio": {"rate": 44100}}``) or dotted
+        (``{"audio.rate": 44100}``).
+    env : mapping, optional
+        Environment (default ``os.environ``); see :data:`ENV_VARS`.
+    user_file : bool
+        Read the platform user config file when no path is given (False: defaults only).
+
+    Returns
+    -------
+    config : Config
+
+    Raises
+    ------
+    ConfigError
+        Unreadable file, YAML syntax error, unknown key, wrong type, out-of-range value
+        or inconsistent values; the message names file, line, key, value and the allowed range.
+    """
+    env = os.environ if env is None else env
+    default_name = "vibsynth/data/" + DEFAULT_CONFIG_RESOURCE
+    default_doc = parse_yaml(default_config_text(), default_name)
+    data: dict[str, Any] = {}
+    sources: dict[str, str] = {}
+    _apply_layer(data, sources, _file_layer(default_doc), lambda k: f"default ({default_doc.where(tuple(k.split('.')))})")
+    files = [default_name]
+
+    user_path: Path | None = None
+    if path is not None:
+        user_path = Path(path).expanduser()
+    elif env.get(CONFIG_ENV_VAR):
+        user_path = Path(env[CONFIG_ENV_VAR]).expanduser()
+    elif user_file and user_config_file().is_file():
+        user_path = user_config_file()
+    if user_path is not None:
+        doc = read_yaml_file(user_path)
+        _apply_layer(data, sources, _file_layer(doc), lambda k, d=doc: d.where(tuple(k.split("."))))
+        files.append(str(user_path))
+
+    env_values: dict[str, Any] = {}
+    env_names: dict[str, str] = {}
+    for var, dotted in ENV_VARS.items():
+        if var in env and env[var] != "":
+            env_values[dotted] = _parse_env_value(var, env[var])
+            env_names[dotted] = var
+    if dotted_values := env_values:
+        _validate_layer(dotted_values, lambda k: f"environment variable {env_names[k]}")
+        _apply_layer(data, sources, dotted_values, lambda k: f"env {env_names[k]}")
+
     if overrides:
-        _merge(data, overrides)
-    return Config(data=data)
+        _apply_layer(data, sources, _override_layer(overrides), lambda k: "command line")
+
+    _cross_check(data, sources)
+    return Config(data=data, sources=sources, files=files)
+
+
+def check_config_file(path: str | os.PathLike[str]) -> Config:
+    """Validate one config file on top of the defaults (no user file, no environment)."""
+    return load_config(path, env={}, user_file=False)
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """Parse a command-line ``KEY=VALUE`` (value in YAML syntax, e.g. ``audio.rate=44100``)."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key.strip():
+        raise ConfigError(f"command line: --set {text!r}: expected KEY=VALUE, e.g. --set audio.rate=44100")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        value = raw
+    return key.strip(), value
+
+
+# --------------------------------------------------------------------------- actuator profiles
+ACTUATOR_RESOURCE = "config/actuators"
+_PROFILE_KEYS = {
+    "name": string(pattern=_PROFILE_NAME, what="a profile name (letters, digits, . _ -)"),
+    "description": string(what="text"),
+    "example": boolean(),
+    "source": string(what="text"),
+    "response": _points("Hz", 0, True, -60, 60, 1, False, "response points"),
+}
+
+
+def user_profile_dir() -> Path:
+    """Folder for user actuator profiles: ``actuators/`` in the platform config folder."""
+    return user_config_file().parent / "actuators"
+
+
+def actuator_profiles() -> dict[str, str]:
+    """Available actuator profiles: name -> file (user profiles override shipped ones)."""
+    out: dict[str, str] = {}
+    shipped = resources.files("vibsynth.data").joinpath(ACTUATOR_RESOURCE)
+    if shipped.is_dir():
+        for item in shipped.iterdir():
+            if item.name.endswith(".yaml"):
+                out[item.name[:-5]] = str(item)
+    user = user_profile_dir()
+    if user.is_dir():
+        for item in user.glob("*.yaml"):
+            out[item.stem] = str(item)
+    return out
+
+
+def load_actuator_profile(name: str) -> dict[str, Any]:
+    """Read and validate one actuator profile by name.
+
+    Returns
+    -------
+    profile : dict
+        ``name``, ``description``, ``example`` (True for illustrative profiles), ``response`` [[Hz, dB], ...].
+    """
+    profiles = actuator_profiles()
+    if name not in profiles:
+        raise ConfigError(f"unknown actuator profile {name!r}{_close(name, list(profiles))} "
+                          f"(available: {', '.join(sorted(profiles))})")
+    doc = read_yaml_file(profiles[name])
+    if not isinstance(doc.data, dict):
+        raise ConfigError(f"{doc.origin}: an actuator profile must be a mapping with name, description, response")
+    for key, value in doc.data.items():
+        spec = _PROFILE_KEYS.get(key)
+        if spec is None:
+            raise ConfigError(f"{doc.where((str(key),))}: unknown key {key!r} (allowed: {', '.join(_PROFILE_KEYS)})")
+        reason = spec.check(value)
+        if reason:
+            raise ConfigError(f"{doc.where((str(key),))}: {key} = {_fmt(value)}: {reason} (allowed: {spec.allowed})")
+    if "response" not in doc.data:
+        raise ConfigError(f"{doc.origin}: missing key 'response' ([[Hz, dB], ...])")
+    if doc.data.get("name", name) != name:
+        raise ConfigError(f"{doc.where(('name',))}: name = {doc.data['name']!r} does not match the file name "
+                          f"{name}.yaml")
+    return {"name": name, "description": doc.data.get("description", ""), "example": doc.data.get("example", False),
+            "source": doc.data.get("source", ""), "response": doc.data["response"], "file": doc.origin}
+
+
+def resolve_actuator_response(config: Config) -> list[tuple[float, float]]:
+    """The actuator response points ``[(Hz, dB), ...]`` to equalise for.
+
+    An explicit ``actuator.response`` wins; else the points of ``actuator.profile``;
+    else (profile null) an empty list (flat).
+    """
+    actuator = config.section("actuator")
+    if actuator.get("response") is not None:
+        return [(float(hz), float(db)) for hz, db in actuator["response"]]
+    if actuator.get("profile") is None:
+        return []
+    return [(float(hz), float(db)) for hz, db in load_actuator_profile(actuator["profile"])["response"]]
