@@ -10,6 +10,7 @@ import gzip
 import io as _io
 import os
 import tempfile
+import warnings
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -70,7 +71,9 @@ def _scale_wav(data: NDArray[Any]) -> NDArray[np.float64]:
 
 def _read_wav(path: Path, channel: int) -> tuple[NDArray[np.float64], float]:
     try:
-        fs, data = wavfile.read(path)
+        with warnings.catch_warnings():  # unknown chunks (e.g. LIST metadata) are harmless
+            warnings.simplefilter("ignore", wavfile.WavFileWarning)
+            fs, data = wavfile.read(path)
     except (ValueError, EOFError, OSError, IndexError, TypeError) as exc:
         raise InputError(f"{path}: not a readable WAV file ({exc})") from None
     samples = _scale_wav(np.asarray(data))

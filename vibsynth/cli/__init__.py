@@ -29,7 +29,7 @@ vibsynth: haptic texture synthesis from two perceptual knobs.
 
 Units used everywhere:
   intensity  knob 0..1; 0 = silent; (0, 1] spans --range-db (default 40 dB) below
-             the ceiling band level (default -24 dB re unit RMS) of the 80-200 Hz
+             the ceiling band level (default -40 dB re unit RMS) of the 80-200 Hz
              Butterworth band (the paper's intensity model).
   balance    high/low frequency balance, dimensionless: 0 = the basis' mean
              spectrum M, +1/-1 = the 98th/2nd percentile of t1 over the basis'

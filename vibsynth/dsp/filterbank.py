@@ -1,4 +1,4 @@
-"""The paper's perceptual filter bank: 30 log-spaced second-order band-pass filters.
+r"""The paper's perceptual filter bank: 30 log-spaced second-order band-pass filters.
 
 Design choice (rate independence)
 ---------------------------------

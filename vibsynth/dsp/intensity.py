@@ -1,12 +1,12 @@
-"""The paper's intensity model and the intensity knob.
+r"""The paper's intensity model and the intensity knob.
 
 Perceived intensity of a noisy vibration follows the power in the 80-200 Hz band,
 measured through a 2nd-order Butterworth band-pass (paper, "Model of intensity
 perception"; R^2 = 0.90). As in MATLAB's and SciPy's ``butter(2, [80, 200])`` the
 band-pass has order 2 per edge (4 poles). We use its *analog* magnitude response,
 
-.. math:: |H(f)|^2 = \\frac{1}{1 + \\left(\\frac{f^2 - f_0^2}{f\\,B}\\right)^{2N}},
-   \\quad f_0 = \\sqrt{80 \\cdot 200}, \\; B = 120, \\; N = 2,
+.. math:: |H(f)|^2 = \frac{1}{1 + \left(\frac{f^2 - f_0^2}{f\,B}\right)^{2N}},
+   \quad f_0 = \sqrt{80 \cdot 200}, \; B = 120, \; N = 2,
 
 applied on the FFT grid, so the level does not depend on the sample rate.
 
@@ -53,9 +53,11 @@ __all__ = [
 
 INTENSITY_BAND_HZ = (80.0, 200.0)
 BUTTERWORTH_ORDER = 2
-#: Band level at knob = 1 (dB re unit RMS). With the default basis, the noise at
-#: balance 0 then peaks near -10 dBFS; balance +-1 stays below full scale without the limiter.
-DEFAULT_CEILING_DB = -24.0
+#: Band level at knob = 1 (dB re unit RMS). The default basis' spectra put most power
+#: above 200 Hz: the peak of a 4 s loop lies 19 dB (balance -3.5) to 38 dB (balance +2)
+#: above the band level, so at knob 1 the noise peaks near -7 dBFS at balance 0 and
+#: never above -2 dBFS at any balance, before the limiter.
+DEFAULT_CEILING_DB = -40.0
 #: Knob range: knob -> 0+ is ``DEFAULT_RANGE_DB`` below the ceiling.
 DEFAULT_RANGE_DB = 40.0
 #: Levels at or below this are treated as silence (about 1e-10 RMS).
