@@ -428,6 +428,14 @@ def test_fuzzed_bytes_never_raise_and_keep_knobs_in_range():
         assert -3.5 <= state.balance <= 3.5
 
 
+def test_invert_binding():
+    mapper, ctl, engine, port = make(mode="continuous", mapping={"intensity": [{"cc": 11, "invert": True}]})
+    play(mapper, port, cc(11, 0))
+    assert knob(ctl, "intensity") == 1.0
+    play(mapper, port, cc(11, 127))
+    assert knob(ctl, "intensity") == 0.0
+
+
 def test_values_are_clamped_before_the_controller():
     mapper, ctl, engine, port = make(mode="continuous",
                                      mapping={"intensity": [{"cc": 11, "range": [-1, 2]}],

@@ -119,6 +119,8 @@ class Binding:
     low, high : float or None
         Knob values at the controller's minimum and maximum; None = the knob's
         full live range (intensity 0..1, balance the controller's limits).
+    invert : bool
+        Swap the ends (controller maximum -> low end).
     """
 
     knob: str
@@ -127,6 +129,7 @@ class Binding:
     channel: int | None = None
     low: float | None = None
     high: float | None = None
+    invert: bool = False
 
     def to_config(self) -> dict[str, Any]:
         """The binding as a ``midi.mapping`` list entry (1-based channel)."""
@@ -139,6 +142,8 @@ class Binding:
             out["channel"] = self.channel + 1
         if self.low is not None and self.high is not None:
             out["range"] = [self.low, self.high]
+        if self.invert:
+            out["invert"] = True
         return out
 
     def same_source(self, other: "Binding") -> bool:
@@ -164,7 +169,7 @@ def parse_bindings(mapping: Mapping[str, Any] | None, nrpn: Mapping[str, Any] | 
     Parameters
     ----------
     mapping : mapping
-        ``{knob: [{cc: N, channel: 1-16, range: [low, high]} | {nrpn: N | [msb, lsb]}, ...]}``.
+        ``{knob: [{cc: N, channel: 1-16, invert: bool, range: [low, high]} | {nrpn: N | [msb, lsb]}, ...]}``.
     nrpn : mapping, optional
         ``{knob: N | [msb, lsb]}``: shorthand NRPN bindings (default :data:`DEFAULT_NRPN`).
 
@@ -205,7 +210,10 @@ def parse_bindings(mapping: Mapping[str, Any] | None, nrpn: Mapping[str, Any] | 
                     raise ConfigError(f"{w}.range: expected [low, high], got {rng!r}") from None
                 if not (math.isfinite(low) and math.isfinite(high)):
                     raise ConfigError(f"{w}.range: must be finite, got {rng!r}")
-            out.append(Binding(knob, cc, num, channel, low, high))
+            invert = entry.get("invert", False)
+            if not isinstance(invert, bool):
+                raise ConfigError(f"{w}.invert: expected true or false, got {invert!r}")
+            out.append(Binding(knob, cc, num, channel, low, high, invert))
     for knob, number in (DEFAULT_NRPN if nrpn is None else nrpn or {}).items():
         if knob not in KNOBS:
             raise ConfigError(f"midi.nrpn.{knob}: unknown knob; knobs are {', '.join(KNOBS)}")
@@ -730,6 +738,8 @@ class MidiMapper:
             if b.channel is not None and b.channel != midi_channel:
                 continue
             applied = True
+            if b.invert:
+                raw = top - raw
             if b.knob == "intensity":
                 low = 0.0 if b.low is None else b.low
                 high = 1.0 if b.high is None else b.high
