@@ -53,6 +53,9 @@ __all__ = [
     "actuator_profiles",
     "load_actuator_profile",
     "resolve_actuator_response",
+    "add_config_arguments",
+    "config_from_args",
+    "parse_override",
 ]
 
 DEFAULT_CONFIG_RESOURCE = "config/default.yaml"
@@ -799,3 +802,25 @@ def resolve_actuator_response(config: Config) -> list[tuple[float, float]]:
     if actuator.get("profile") is None:
         return []
     return [(float(hz), float(db)) for hz, db in load_actuator_profile(actuator["profile"])["response"]]
+
+
+# --------------------------------------------------------------------------- command-line helpers
+def add_config_arguments(parser: Any) -> None:
+    """Add ``--config FILE`` and ``--set KEY=VALUE`` (repeatable) to an argparse parser."""
+    parser.add_argument("--config", metavar="FILE.yaml", type=Path,
+                        help=f"user config file (default: ${CONFIG_ENV_VAR}, else {user_config_file()})")
+    parser.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], dest="config_set",
+                        help="override one config value (YAML syntax), e.g. --set audio.rate=44100; repeatable")
+
+
+def config_from_args(args: Any, *, extra: Mapping[str, Any] | None = None) -> Config:
+    """The effective config for parsed arguments (see :func:`add_config_arguments`).
+
+    ``extra``: further command-line values (dotted keys) from a command's own flags,
+    applied after ``--set``; ``None`` values are left out.
+    """
+    overrides: dict[str, Any] = dict(parse_override(text) for text in getattr(args, "config_set", None) or [])
+    for key, value in (extra or {}).items():
+        if value is not None:
+            overrides[key] = value
+    return load_config(getattr(args, "config", None), overrides=overrides or None)

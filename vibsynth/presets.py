@@ -178,6 +178,8 @@ def _is_number(value: Any) -> bool:
 
 
 def _show(value: Any) -> str:
+    if isinstance(value, bool) or value is None:
+        return {True: "true", False: "false", None: "null"}[value]
     return repr(value)
 
 

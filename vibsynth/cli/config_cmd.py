@@ -1,0 +1,96 @@
+"""``vibsynth config show|check|path``: the effective configuration and where each value comes from."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from vibsynth.config import (
+    ENV_VARS,
+    SCHEMA,
+    add_config_arguments,
+    check_config_file,
+    config_from_args,
+    resolve_actuator_response,
+    user_config_file,
+)
+
+__all__ = ["ORDER", "register"]
+
+ORDER = 80
+
+
+def _value(value: Any) -> str:
+    return yaml.safe_dump(value, default_flow_style=True, width=10_000).strip().removesuffix("\n...").strip()
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    config = config_from_args(args)
+    leaves = config.leaves()
+    if args.key:
+        leaves = {k: v for k, v in leaves.items() if k == args.key or k.startswith(args.key + ".")}
+        if not leaves:
+            config.get(args.key)  # raises with a "did you mean"
+    if args.json:
+        print(json.dumps({k: {"value": v, "source": config.sources.get(k, "")} for k, v in leaves.items()},
+                         indent=2, default=str))
+        return 0
+    if args.yaml:
+        print(yaml.safe_dump(config.data, sort_keys=False, default_flow_style=None), end="")
+        return 0
+    rows = [(k, _value(v), config.sources.get(k, "")) for k, v in leaves.items()]
+    width_key = max(len(r[0]) for r in rows)
+    width_val = min(48, max(len(r[1]) for r in rows))
+    for key, value, source in rows:
+        print(f"{key:<{width_key}}  {value:<{width_val}}  # {source}")
+    print(f"\nfiles read (lowest first): {', '.join(config.files)}", file=sys.stderr)
+    if config.get("actuator.profile") and config.get("actuator.response") is None:
+        points = resolve_actuator_response(config)
+        print(f"actuator profile {config.get('actuator.profile')!r}: {len(points)} response points", file=sys.stderr)
+    return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    for path in args.files:
+        check_config_file(path)  # raises ConfigError naming file:line, key, value, allowed
+        print(f"{path}: OK")
+    return 0
+
+
+def cmd_path(args: argparse.Namespace) -> int:
+    user = user_config_file()
+    print(f"user config file: {user}{'' if user.exists() else ' (does not exist)'}")
+    print("environment variables: " + ", ".join(f"{var} -> {key}" for var, key in ENV_VARS.items()))
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``vibsynth config ...``."""
+    parser = subparsers.add_parser(
+        "config", help="show the effective configuration or check a config file",
+        description="Configuration (docs/config.md). Layers: built-in defaults < user config file "
+                    "(--config, $VIBSYNTH_CONFIG or the platform folder) < VIBSYNTH_* environment variables < "
+                    "command line (--set KEY=VALUE).")
+    sub = parser.add_subparsers(dest="config_command", metavar="ACTION", required=True)
+
+    p = sub.add_parser("show", help="effective config, each value with its source")
+    add_config_arguments(p)
+    p.add_argument("key", nargs="?", help="only this key or section (e.g. audio, osc.port)")
+    fmt = p.add_mutually_exclusive_group()
+    fmt.add_argument("--json", action="store_true", help="values and sources as JSON")
+    fmt.add_argument("--yaml", action="store_true", help="the effective config as a YAML file (no sources)")
+    p.set_defaults(func=cmd_show)
+
+    p = sub.add_parser("check", help="validate config files (errors name file, line, key, value, range)")
+    p.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("path", help="where the user config file is and which environment variables apply")
+    p.set_defaults(func=cmd_path)
+
+
+_ = SCHEMA  # documented keys live in vibsynth.config.SCHEMA

@@ -1,0 +1,336 @@
+"""``vibsynth preset list|show|new|from-recording|play``: the designer's preset workflow."""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import logging
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+from vibsynth import __version__
+from vibsynth.config import Config, add_config_arguments, config_from_args
+from vibsynth.errors import PresetError
+from vibsynth.presets import (
+    BALANCE_LIMIT,
+    GLIDE_MAX_MS,
+    Preset,
+    PresetLibrary,
+    load_library,
+    preset_to_yaml,
+)
+
+__all__ = ["ORDER", "register"]
+
+ORDER = 40
+log = logging.getLogger(__name__)
+
+
+# --------------------------------------------------------------------------- argument types
+def _float_in(low: float, high: float, unit: str = "") -> Any:
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not math.isfinite(value) or not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range [{low:g}, {high:g}]{unit}")
+        return value
+
+    return parse
+
+
+def _program(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 0 <= value <= 127:
+        raise argparse.ArgumentTypeError(f"{value} is outside the allowed range [0, 127]")
+    return value
+
+
+def _tags(text: str) -> list[str]:
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+# --------------------------------------------------------------------------- helpers
+def _library(args: argparse.Namespace) -> tuple[Config, PresetLibrary]:
+    config = config_from_args(args)
+    library = load_library(config)
+    for path, message in library.errors.items():
+        print(f"vibsynth: warning: {message}", file=sys.stderr)
+    return config, library
+
+
+def _fmt_table(rows: list[list[str]]) -> str:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows)
+
+
+def _write_new(library: PresetLibrary, preset: Preset, output: Path | None, force: bool) -> Path:
+    if output is not None:
+        from vibsynth.presets import save_preset
+
+        target = output / f"{preset.name}.yaml" if output.is_dir() else output
+        if target.exists() and not force:
+            raise PresetError(f"{target}: exists already (use --force to replace it)")
+        return save_preset(preset, target)
+    return library.save_user(preset, overwrite=force)
+
+
+# --------------------------------------------------------------------------- commands
+def cmd_list(args: argparse.Namespace) -> int:
+    _, library = _library(args)
+    programs = {name: number for number, name in library.program_map().items()}
+    presets = library.presets()
+    if args.tag:
+        presets = [p for p in presets if args.tag in p.tags]
+    if args.json:
+        print(json.dumps([{**p.to_dict(), "program": programs.get(p.name), "origin": p.origin,
+                           "path": str(p.path)} for p in presets], indent=2))
+        return 0
+    if args.sort == "balance":
+        presets.sort(key=lambda p: p.balance)
+    elif args.sort == "program":
+        presets.sort(key=lambda p: programs.get(p.name, 999))
+    rows = [["NAME", "INTENSITY", "BALANCE", "PROGRAM", "FROM", "TAGS"]]
+    for p in presets:
+        number = programs.get(p.name)
+        prog = "-" if number is None else (str(number) if p.program is not None else f"{number}*")
+        rows.append([p.name, f"{p.intensity:.3f}", f"{p.balance:+.3f}", prog, p.origin, ", ".join(p.tags)])
+    print(_fmt_table(rows))
+    print(f"\n{len(presets)} presets; user folder: {library.user_dir}" +
+          ("; * = program by name order (no program: field)" if any(r[3].endswith("*") for r in rows[1:]) else ""))
+    return 0
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    _, library = _library(args)
+    preset = library.get(args.name)
+    if args.json:
+        print(json.dumps({**preset.to_dict(), "origin": preset.origin, "path": str(preset.path)}, indent=2))
+        return 0
+    print(f"# {preset.origin} preset: {preset.path}")
+    print(preset_to_yaml(preset, header=""), end="")
+    return 0
+
+
+def cmd_new(args: argparse.Namespace) -> int:
+    _, library = _library(args)
+    base: dict[str, Any] = {}
+    if args.like:
+        template = library.get(args.like)
+        base = {"intensity": template.intensity, "balance": template.balance, "glide_ms": template.glide_ms,
+                "tags": template.tags, "description": template.description}
+    intensity = args.intensity if args.intensity is not None else base.get("intensity")
+    balance = args.balance if args.balance is not None else base.get("balance")
+    if intensity is None or balance is None:
+        raise PresetError("preset new: give --intensity I and --balance B (or --like NAME to start from a preset)")
+    preset = Preset(
+        name=args.name,
+        intensity=intensity,
+        balance=balance,
+        description=args.description if args.description is not None else base.get("description", ""),
+        glide_ms=args.glide_ms if args.glide_ms is not None else base.get("glide_ms"),
+        program=args.program,
+        tags=tuple(args.tags) if args.tags is not None else tuple(base.get("tags", ())),
+        provenance={"created_by": f"vibsynth {__version__} (preset new)"} | ({"like": args.like} if args.like else {}),
+    )
+    if preset.name in library and not args.force and args.output is None:
+        existing = library.get(preset.name)
+        if existing.origin == "shipped":
+            print(f"vibsynth: note: {preset.name!r} overrides the shipped preset of that name", file=sys.stderr)
+    path = _write_new(library, preset, args.output, args.force)
+    print(f"wrote {path}")
+    return 0
+
+
+def cmd_from_recording(args: argparse.Namespace) -> int:
+    from vibsynth.dsp.analysis import analyze
+    from vibsynth.errors import ParameterError
+    from vibsynth.io import default_basis, load_basis, read_recording
+
+    config, library = _library(args)
+    recording = read_recording(args.file, fs=args.rate, channel=args.channel)
+    basis = load_basis(args.basis) if args.basis else default_basis()
+    knobs = config.section("knobs")
+    try:
+        result = analyze(recording.samples, fs=recording.fs, basis=basis, ceiling_db=knobs["ceiling_db"],
+                         range_db=knobs["range_db"])
+    except ParameterError as exc:
+        raise PresetError(f"{recording.path}: {exc}") from None
+    intensity = min(1.0, max(0.0, result.intensity_knob))
+    if intensity != result.intensity_knob:
+        print(f"vibsynth: warning: {recording.path}: level {result.level_db:.1f} dB maps to intensity "
+              f"{result.intensity_knob:.3f}, outside [0, 1] with knobs.ceiling_db = {knobs['ceiling_db']:g} and "
+              f"range_db = {knobs['range_db']:g}; clamped to {intensity:g}", file=sys.stderr)
+    balance = result.balance
+    if abs(balance) > BALANCE_LIMIT:
+        clamped = math.copysign(BALANCE_LIMIT, balance)
+        print(f"vibsynth: warning: {recording.path}: balance {balance:+.3f} is beyond the preset limit "
+              f"+-{BALANCE_LIMIT:g}; clamped to {clamped:+g}", file=sys.stderr)
+        balance = clamped
+    if result.outside_database:
+        print(f"vibsynth: note: {recording.path}: t1 = {result.t1:.2f} lies outside the basis' database "
+              "(represented, not clamped)", file=sys.stderr)
+    digest = hashlib.sha256(recording.path.read_bytes()).hexdigest()[:16]
+    provenance = {
+        "recording": recording.path.name,
+        "recording_sha256": digest,
+        "fs_hz": float(recording.fs),
+        "duration_s": round(result.duration_s, 4),
+        "level_db_80_200hz": round(result.level_db, 3),
+        "intensity_mapping": {"ceiling_db": float(knobs["ceiling_db"]), "range_db": float(knobs["range_db"])},
+        "intensity_knob_unclamped": round(result.intensity_knob, 4),
+        "t1": round(result.t1, 4),
+        "balance": round(result.balance, 4),
+        "scores": [round(float(s), 4) for s in result.scores],
+        "non_stationarity_db": round(result.non_stationarity_db, 3),
+        "outside_database": bool(result.outside_database),
+        "basis_id": basis.id,
+        "created_by": f"vibsynth {__version__} (preset from-recording)",
+    }
+    name = args.name or recording.path.stem
+    preset = Preset(name=name, intensity=round(intensity, 4), balance=round(balance, 4),
+                    description=args.description or f"From the recording {recording.path.name}.",
+                    glide_ms=args.glide_ms, program=args.program, tags=tuple(args.tags or ()), provenance=provenance)
+    path = _write_new(library, preset, args.output, args.force)
+    print(f"wrote {path}: intensity {preset.intensity:.3f}, balance {preset.balance:+.3f} "
+          f"(level {result.level_db:.1f} dB, t1 {result.t1:.2f})")
+    return 0
+
+
+def render_preset(config: Config, library: PresetLibrary, name: str, seconds: float) -> tuple[Any, float]:
+    """Render a preset through the engine (``vibsynth.service.build_engine``) for ``seconds``.
+
+    Returns
+    -------
+    samples : ndarray, shape (frames, channels)
+    fs : float
+    """
+    import numpy as np
+
+    from vibsynth.control.controller import Controller, KnobLimits
+
+    try:
+        from vibsynth.service import build_engine
+    except ImportError as exc:  # pragma: no cover - service.py comes from another issue
+        raise PresetError(f"preset play needs vibsynth.service.build_engine ({exc})") from None
+    preset = library.get(name)
+    engine = build_engine(config)
+    knobs = config.section("knobs")
+    controller = Controller(engine, limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),
+                            preset_resolver=library.get, initial_glide_s=knobs["glide_ms"] / 1000.0)
+    controller.load_preset(preset.name, source="cli")
+    fs = float(engine.fs)
+    total = int(round(seconds * fs))
+    block = int(config.get("audio.block_size"))
+    out = np.empty((total, engine.channels), dtype=np.float32)
+    done = 0
+    while done < total:
+        n = min(block, total - done)
+        out[done:done + n] = engine.render(n)
+        done += n
+    return out, fs
+
+
+def cmd_play(args: argparse.Namespace) -> int:
+    config = config_from_args(args, extra={"audio.channels": args.channels})
+    library = load_library(config)
+    preset = library.get(args.name)
+    if args.output is not None:
+        from vibsynth.io import write_wav
+
+        samples, fs = render_preset(config, library, preset.name, args.seconds)
+        write_wav(args.output, samples, fs, sample_format=args.format)
+        print(f"wrote {args.output}: {preset.name} (intensity {preset.intensity:.3f}, balance {preset.balance:+.3f}),"
+              f" {args.seconds:g} s at {fs:g} Hz, {samples.shape[1]} channel(s)")
+        return 0
+    import time
+
+    from vibsynth.control.controller import Controller, KnobLimits
+
+    try:
+        from vibsynth.service import build_engine, open_output
+    except ImportError as exc:  # pragma: no cover
+        raise PresetError(f"preset play needs vibsynth.service ({exc}); use -o FILE.wav meanwhile") from None
+    engine = build_engine(config)
+    knobs = config.section("knobs")
+    controller = Controller(engine, limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),
+                            preset_resolver=library.get, initial_glide_s=knobs["glide_ms"] / 1000.0)
+    output = open_output(config, engine, args.device)
+    try:
+        if hasattr(output, "start"):
+            output.start()
+        controller.load_preset(preset.name, source="cli")
+        print(f"playing {preset.name} for {args.seconds:g} s (Ctrl-C stops)", file=sys.stderr)
+        time.sleep(args.seconds)
+        controller.panic(source="cli")
+        time.sleep(max(0.05, knobs["mute_fade_ms"] / 1000.0 * 2))
+    finally:
+        for method in ("stop", "close"):
+            if hasattr(output, method):
+                getattr(output, method)()
+    return 0
+
+
+# --------------------------------------------------------------------------- parser
+def register(subparsers: Any) -> None:
+    """Add ``vibsynth preset ...``."""
+    parser = subparsers.add_parser("preset", help="list, show, create and play presets",
+                                   description="Presets: named textures in YAML files (docs/presets.md). "
+                                   "User presets override shipped ones of the same name.")
+    sub = parser.add_subparsers(dest="preset_command", metavar="ACTION", required=True)
+
+    p = sub.add_parser("list", help="table of presets: name, intensity, balance, program, tags")
+    add_config_arguments(p)
+    p.add_argument("--sort", choices=("name", "balance", "program"), default="name")
+    p.add_argument("--tag", help="only presets with this tag")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=cmd_list)
+
+    p = sub.add_parser("show", help="print one preset (YAML) and its file")
+    add_config_arguments(p)
+    p.add_argument("name")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_show)
+
+    def add_common_new(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--glide-ms", type=_float_in(0, GLIDE_MAX_MS, " ms"), help="glide when applied (ms)")
+        p.add_argument("--program", type=_program, help="MIDI program number 0..127")
+        p.add_argument("--tags", type=_tags, help="comma-separated tags")
+        p.add_argument("--description")
+        p.add_argument("-o", "--output", type=Path, help="write here instead of the user preset folder")
+        p.add_argument("--force", action="store_true", help="replace an existing file")
+
+    p = sub.add_parser("new", help="create a user preset")
+    add_config_arguments(p)
+    p.add_argument("name")
+    p.add_argument("--balance", type=_float_in(-BALANCE_LIMIT, BALANCE_LIMIT), help="balance (knob units)")
+    p.add_argument("--intensity", type=_float_in(0, 1), help="intensity 0..1")
+    p.add_argument("--like", metavar="PRESET", help="start from an existing preset's values")
+    add_common_new(p)
+    p.set_defaults(func=cmd_new)
+
+    p = sub.add_parser("from-recording", help="analyse a recording and save it as a preset (with provenance)")
+    add_config_arguments(p)
+    p.add_argument("file", type=Path, help="recording: .wav, or .csv/.txt with --rate")
+    p.add_argument("--name", help="preset name (default: the file name)")
+    p.add_argument("--rate", type=_float_in(2400, 768000, " Hz"), help="sample rate of a CSV/TXT recording (Hz)")
+    p.add_argument("--channel", type=int, default=0, help="channel of a multi-channel WAV (0-based)")
+    p.add_argument("--basis", type=Path, help="spectral basis YAML (default: the shipped basis)")
+    add_common_new(p)
+    p.set_defaults(func=cmd_from_recording)
+
+    p = sub.add_parser("play", help="play a preset through the configured output, or render it to a WAV (-o)")
+    add_config_arguments(p)
+    p.add_argument("name")
+    p.add_argument("--seconds", type=_float_in(0.01, 3600, " s"), default=3.0)
+    p.add_argument("-o", "--output", type=Path, help="write a WAV file instead of playing")
+    p.add_argument("--format", choices=("float32", "pcm16"), default="float32", help="WAV sample format")
+    p.add_argument("--device", help="output device (name substring or index; default: audio.device)")
+    p.add_argument("--channels", type=int, help="actuator channels (default: audio.channels)")
+    p.set_defaults(func=cmd_play)
