@@ -1,0 +1,772 @@
+"""OSC control server: the address space VR apps and live-coding tools drive (see docs/osc.md).
+
+Layers (each its own module, tests use each without a socket):
+
+* :mod:`~vibsynth.control.osc_codec` - wire format (strict, bounded decoder);
+* :mod:`~vibsynth.control.osc_address` - address table and OSC 1.0 pattern matching;
+* :class:`OscHandler` (here) - one method per address: validates arguments at the edge,
+  calls the :class:`~vibsynth.control.controller.Controller`, replies to the sender;
+  bundles with future timetags are converted to stream frames (``at_frame``);
+* :mod:`~vibsynth.control.osc_server` - UDP (and optional TCP/SLIP) transports;
+* :mod:`~vibsynth.control.osc_workers` - ``/notify`` pushes and deferred ``/sync`` replies.
+
+The service calls :func:`add_arguments` and :func:`create` (adapter contract of
+:mod:`vibsynth.control`).
+"""
+from __future__ import annotations
+
+import argparse
+import bisect
+import logging
+import math
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+from vibsynth import __version__
+from vibsynth.control.controller import Controller, KnobEvent, check_finite, check_range
+from vibsynth.control.osc_address import AddressSpace, normalize_prefix
+from vibsynth.control.osc_codec import (
+    IMMEDIATE,
+    MalformedPacket,
+    Message,
+    decode_packet,
+    encode_message,
+    iter_messages,
+    ntp_to_unix,
+)
+from vibsynth.control.osc_server import (
+    DEFAULT_RCVBUF,
+    TcpSlipTransport,
+    TransportStats,
+    UdpTransport,
+    resolve_allow_list,
+)
+from vibsynth.control.osc_workers import Notifier, PeerLike, SyncWorker, setter_message
+from vibsynth.errors import ConfigError, ParameterError, PresetError, VibsynthError
+
+__all__ = [
+    "OscArgumentError",
+    "SpeedCurve",
+    "StreamClock",
+    "OscStats",
+    "OscHandler",
+    "OscServer",
+    "add_arguments",
+    "create",
+]
+
+log = logging.getLogger(__name__)
+
+SOURCE = "osc"
+SPEED_SOURCE = "osc-speed"
+_NUMERIC = frozenset("ifdh")
+_LOOPBACK = {"127.0.0.1", "::1", "localhost"}
+
+
+class OscArgumentError(ParameterError):
+    """Wrong number or type of OSC arguments."""
+
+
+# ---------------------------------------------------------------------- speed
+class SpeedCurve:
+    """Scanning speed (mm/s) -> intensity, piecewise linear; optional balance shift.
+
+    Parameters
+    ----------
+    points : sequence of (mm/s, intensity)
+        Strictly increasing speeds >= 0, intensities in [0, 1]. Below the first point the
+        first intensity applies, above the last the last one. The default
+        ``[[0, 0], [10, 0.35], [50, 0.6], [150, 0.85], [300, 1]]`` is silent at rest.
+    balance_per_decade : float
+        Balance added per decade of speed above 100 mm/s (0 = speed leaves balance alone).
+
+    Raises
+    ------
+    ConfigError
+        If the points are not a valid curve.
+    """
+
+    REFERENCE_MM_S = 100.0
+
+    def __init__(self, points: Sequence[Sequence[float]], balance_per_decade: float = 0.0) -> None:
+        try:
+            pts = [(float(s), float(v)) for s, v in points]
+            self.balance_per_decade = float(balance_per_decade)
+        except (TypeError, ValueError):
+            raise ConfigError("speed.curve must be a list of [mm/s, intensity] pairs") from None
+        if len(pts) < 1 or not all(math.isfinite(s) and math.isfinite(v) for s, v in pts):
+            raise ConfigError("speed.curve needs at least one finite [mm/s, intensity] point")
+        if any(s < 0 or not 0.0 <= v <= 1.0 for s, v in pts):
+            raise ConfigError("speed.curve speeds must be >= 0 and intensities within [0, 1]")
+        if any(b[0] <= a[0] for a, b in zip(pts, pts[1:])):
+            raise ConfigError("speed.curve speeds must be strictly increasing")
+        if not math.isfinite(self.balance_per_decade):
+            raise ConfigError("speed.balance_per_decade must be finite")
+        self.speeds = [s for s, _ in pts]
+        self.levels = [v for _, v in pts]
+
+    def intensity(self, speed: float) -> float:
+        """Intensity for a speed in mm/s (>= 0)."""
+        xs, ys = self.speeds, self.levels
+        if speed <= xs[0]:
+            return ys[0]
+        if speed >= xs[-1]:
+            return ys[-1]
+        i = bisect.bisect_right(xs, speed)
+        x0, x1, y0, y1 = xs[i - 1], xs[i], ys[i - 1], ys[i]
+        return y0 + (y1 - y0) * (speed - x0) / (x1 - x0)
+
+    def balance_shift(self, speed: float) -> float:
+        """Balance offset for a speed (0 at and below 100 mm/s)."""
+        if self.balance_per_decade == 0.0 or speed <= self.REFERENCE_MM_S:
+            return 0.0
+        return self.balance_per_decade * math.log10(speed / self.REFERENCE_MM_S)
+
+
+# ---------------------------------------------------------------------- clock
+class StreamClock:
+    """Maps wall time (``time.time()``) to the engine's stream position (frames).
+
+    The engine publishes ``frame_position`` in whole blocks, so one sample
+    ``frame/fs - wall`` is late by up to a block; the estimate keeps the largest
+    (least late) offset seen, decaying slowly (``drift`` s/s) so that a small clock
+    drift between the audio device and the system clock is followed, and resets when
+    the stream jumps (restart).
+    """
+
+    def __init__(self, engine: Any, *, drift: float = 2e-4, reset_s: float = 0.25,
+                 wall: Callable[[], float] = time.time) -> None:
+        self.engine = engine
+        self.drift = drift
+        self.reset_s = reset_s
+        self.wall = wall
+        self._offset: float | None = None
+        self._last_wall = 0.0
+
+    def sample(self) -> tuple[int, float]:
+        """Read the engine clock once; return ``(frame_position, wall_time)``."""
+        frame = int(self.engine.frame_position)
+        now = self.wall()
+        offset = frame / float(self.engine.fs) - now
+        est = self._offset
+        if est is None:
+            est = offset
+        else:
+            est -= self.drift * max(0.0, now - self._last_wall)
+            if offset > est or offset < est - self.reset_s:
+                est = offset
+        self._offset = est
+        self._last_wall = now
+        return frame, now
+
+    def frame_at(self, unix_time: float) -> tuple[int, int]:
+        """Stream frame for a wall time; returns ``(frame, current_frame_position)``."""
+        current, _ = self.sample()
+        assert self._offset is not None
+        return int(round((unix_time + self._offset) * float(self.engine.fs))), current
+
+
+# ---------------------------------------------------------------------- handler
+@dataclass
+class OscStats:
+    """Counters of the OSC handler (written on the receive thread only)."""
+
+    messages: int = 0
+    bundles: int = 0
+    scheduled: int = 0
+    malformed: int = 0
+    errors: int = 0
+    error_replies_suppressed: int = 0
+
+
+class _TokenBucket:
+    """At most ``rate`` events per second (burst ``rate``); used to cap error replies."""
+
+    def __init__(self, rate: float) -> None:
+        self.rate = rate
+        self.tokens = rate
+        self.last = time.monotonic()
+
+    def take(self) -> bool:
+        now = time.monotonic()
+        self.tokens = min(self.rate, self.tokens + (now - self.last) * self.rate)
+        self.last = now
+        if self.tokens >= 1.0:
+            self.tokens -= 1.0
+            return True
+        return False
+
+
+def _arg_count(msg: Message, allowed: Sequence[int], what: str) -> None:
+    if len(msg.args) not in allowed:
+        want = " or ".join(str(n) for n in allowed)
+        raise OscArgumentError(f"expects {want} argument(s) ({what}), got {len(msg.args)}")
+
+
+def _number(msg: Message, index: int, name: str) -> float:
+    tag = msg.types[index] if index < len(msg.types) else "?"
+    if tag not in _NUMERIC:
+        raise OscArgumentError(f"{name} must be a number (OSC type i, f, d or h), got type {tag!r}")
+    return check_finite(name, msg.args[index])
+
+
+def _string(msg: Message, index: int, name: str) -> str:
+    tag = msg.types[index] if index < len(msg.types) else "?"
+    if tag not in "sS":
+        raise OscArgumentError(f"{name} must be a string (OSC type s), got type {tag!r}")
+    return str(msg.args[index])
+
+
+def _flag(msg: Message, index: int, name: str) -> bool:
+    tag = msg.types[index] if index < len(msg.types) else "?"
+    if tag in "TF":
+        return bool(msg.args[index])
+    value = _number(msg, index, name)
+    if value not in (0.0, 1.0):
+        raise ParameterError(f"{name} must be 0 or 1, got {value:g}")
+    return value == 1.0
+
+
+class OscHandler:
+    """Decodes packets, routes messages to methods, replies; no sockets, no threads of its own.
+
+    Parameters
+    ----------
+    controller : Controller
+        Everything goes through it (validation, state, engine commands).
+    prefix : str
+        Address prefix (default ``/vibsynth``).
+    speed_curve : SpeedCurve
+    schedule_horizon_s : float
+        Bundles timetagged further ahead are rejected with an error reply.
+    notifier : Notifier, optional
+        Serves ``/notify`` (None: error reply).
+    sync_worker : SyncWorker, optional
+        Serves ``/sync`` requests that cannot be answered at once (None: answer with a
+        short blocking wait; for tests).
+    block_size : int, optional
+        Reported by ``/status`` when the engine does not expose one.
+    error_reply_rate : float
+        Error replies per second (beyond: counted, not sent), so a flood of bad
+        packets costs no reply traffic.
+    extra_status : callable, optional
+        Returns extra ``(key, value)`` pairs for ``/status`` (transport counters).
+    """
+
+    def __init__(
+        self,
+        controller: Controller,
+        *,
+        prefix: str = "/vibsynth",
+        speed_curve: SpeedCurve | None = None,
+        schedule_horizon_s: float = 10.0,
+        notifier: Notifier | None = None,
+        sync_worker: SyncWorker | None = None,
+        block_size: int | None = None,
+        error_reply_rate: float = 500.0,
+        extra_status: Callable[[], list[tuple[str, object]]] | None = None,
+    ) -> None:
+        self.controller = controller
+        self.engine = controller.engine
+        self.space = AddressSpace(prefix, controller.channels)
+        self.prefix = self.space.prefix
+        self.speed_curve = speed_curve or SpeedCurve([[0, 0.0], [10, 0.35], [50, 0.6], [150, 0.85], [300, 1.0]])
+        self.horizon_s = float(schedule_horizon_s)
+        self.notifier = notifier
+        self.sync_worker = sync_worker
+        self.block_size = block_size
+        self.extra_status = extra_status
+        self.clock = StreamClock(self.engine)
+        self.stats = OscStats()
+        self._error_bucket = _TokenBucket(error_reply_rate)
+        self._error_address = f"{self.prefix}/error"
+        self._methods: dict[str, Callable[[Message, tuple[int, ...] | None, PeerLike, int | None], None]] = {
+            "intensity": self._on_intensity, "balance": self._on_balance, "texture": self._on_texture,
+            "glide": self._on_glide, "mute": self._on_mute, "panic": self._on_panic, "preset": self._on_preset,
+            "speed": self._on_speed, "get": self._on_get, "status": self._on_status, "ping": self._on_ping,
+            "sync": self._on_sync, "notify": self._on_notify, "learn": self._on_learn,
+        }
+        # balance set by anything but /speed: the base that the speed shift is added to
+        self._base_balance = [s.balance for s in controller.state()]
+        self._base_lock = threading.Lock()
+        self._unsubscribe: Callable[[], None] | None = None
+        if self.speed_curve.balance_per_decade != 0.0:
+            self._unsubscribe = controller.subscribe(self._track_balance)
+
+    def close(self) -> None:
+        """Detach from the controller."""
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+
+    # -------------------------------------------------------------- entry points
+    def handle_packet(self, data: bytes, peer: PeerLike) -> None:
+        """Handle one datagram (or SLIP frame): decode, schedule, dispatch; never raises for bad input."""
+        try:
+            packet = decode_packet(data)
+        except MalformedPacket as exc:
+            self.stats.malformed += 1
+            self.controller.count_error("osc.malformed")
+            log.debug("OSC: malformed packet of %d bytes: %s", len(data), exc)
+            return
+        if isinstance(packet, Message):
+            self.handle_message(packet, peer)
+            return
+        self.stats.bundles += 1
+        frames: dict[int, int | None | str] = {}
+        for message, timetag in iter_messages(packet):
+            at = frames.get(timetag)
+            if timetag not in frames:
+                at = frames[timetag] = self._frame_for(timetag)
+            if isinstance(at, str):
+                self.stats.messages += 1
+                self._error(peer, message.address, at, "osc.horizon")
+                continue
+            self.handle_message(message, peer, at)
+
+    def handle_message(self, msg: Message, peer: PeerLike, at_frame: int | None = None) -> None:
+        """Route one decoded message (to every method its address pattern matches)."""
+        self.stats.messages += 1
+        try:
+            routes = self.space.match(msg.address)
+        except ParameterError as exc:
+            self._error(peer, msg.address, str(exc), "osc.bad_pattern")
+            return
+        if not routes:
+            self._error(peer, msg.address, "unknown address", "osc.unknown_address")
+            return
+        if len(routes) == 1:
+            route = routes[0]
+            calls = [(route.method, None if route.channel is None else (route.channel,))]
+        else:
+            calls = self.space.group(routes)
+        for method, channels in calls:
+            try:
+                self._methods[method](msg, channels, peer, at_frame)
+            except OscArgumentError as exc:
+                self._error(peer, msg.address, f"{method}: {exc}", "osc.bad_arguments")
+            except PresetError as exc:
+                self._error(peer, msg.address, str(exc), "osc.preset")
+            except ParameterError as exc:
+                self._error(peer, msg.address, str(exc), "osc.invalid_value")
+            except VibsynthError as exc:
+                self._error(peer, msg.address, str(exc), "osc.error")
+
+    # -------------------------------------------------------------- helpers
+    def _frame_for(self, timetag: int) -> int | None | str:
+        """at_frame for a timetag (None = now) or an error message when beyond the horizon."""
+        if timetag == IMMEDIATE:
+            return None
+        when = ntp_to_unix(timetag)
+        ahead = when - time.time()
+        if ahead <= 0.0:
+            return None
+        if ahead > self.horizon_s:
+            return (f"timetag is {ahead:.3g} s ahead, beyond the schedule horizon of {self.horizon_s:g} s "
+                    "(osc.schedule_horizon_s); message rejected")
+        frame, current = self.clock.frame_at(when)
+        if frame <= current:
+            return None
+        self.stats.scheduled += 1
+        return frame
+
+    def _error(self, peer: PeerLike, address: str, message: str, kind: str) -> None:
+        self.stats.errors += 1
+        self.controller.count_error(kind)
+        log.debug("OSC error %s: %s: %s", kind, address, message)
+        if self._error_bucket.take():
+            peer.send(encode_message(self._error_address, (address, message), "ss"))
+        else:
+            self.stats.error_replies_suppressed += 1
+
+    def _reply(self, peer: PeerLike, address: str, args: Sequence[object] = (), types: str | None = None) -> None:
+        peer.send(encode_message(address, args, types))
+
+    def _track_balance(self, event: KnobEvent) -> None:
+        if event.name == "balance" and event.source != SPEED_SOURCE:
+            with self._base_lock:
+                self._base_balance[event.channel] = float(event.value)  # type: ignore[arg-type]
+
+    # -------------------------------------------------------------- knob methods
+    def _on_intensity(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "intensity 0..1")
+        self.controller.set_knob("intensity", _number(msg, 0, "intensity"), channels=channels,
+                                 at_frame=at_frame, source=SOURCE)
+
+    def _on_balance(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "balance")
+        self.controller.set_knob("balance", _number(msg, 0, "balance"), channels=channels,
+                                 at_frame=at_frame, source=SOURCE)
+
+    def _on_texture(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (2,), "intensity, balance")
+        self.controller.set_texture(_number(msg, 0, "intensity"), _number(msg, 1, "balance"),
+                                    channels=channels, at_frame=at_frame, source=SOURCE)
+
+    def _on_glide(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "glide in ms")
+        max_ms = self.controller.limits.glide_max_s * 1000.0
+        ms = check_range("glide (ms)", _number(msg, 0, "glide"), 0.0, max_ms)
+        self.controller.set_glide(ms / 1000.0, channels=channels, at_frame=at_frame, source=SOURCE)
+
+    def _on_mute(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "0 or 1")
+        self.controller.set_mute(_flag(msg, 0, "mute"), channels=channels, at_frame=at_frame, source=SOURCE)
+
+    def _on_panic(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (0, 1), "none, or a button value")
+        if msg.args and not _flag(msg, 0, "panic"):
+            return  # button release (0): nothing to do
+        self.controller.panic(source=SOURCE)
+
+    def _on_preset(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "preset name")
+        self.controller.load_preset(_string(msg, 0, "preset"), channels=channels, at_frame=at_frame, source=SOURCE)
+
+    def _on_speed(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "speed in mm/s")
+        speed = _number(msg, 0, "speed")
+        if speed < 0.0:
+            raise ParameterError(f"speed must be >= 0 mm/s, got {speed:g}")
+        curve = self.speed_curve
+        if curve.balance_per_decade != 0.0:
+            shift = curve.balance_shift(speed)
+            limits = self.controller.limits
+            chans = range(self.controller.channels) if channels is None else channels
+            with self._base_lock:
+                bases = {c: self._base_balance[c] for c in chans}
+            for value in sorted(set(bases.values())):
+                group = tuple(c for c, b in bases.items() if b == value)
+                target = min(max(value + shift, limits.balance_min), limits.balance_max)
+                self.controller.set_knob("balance", target, channels=group, at_frame=at_frame, source=SPEED_SOURCE)
+        self.controller.set_knob("intensity", curve.intensity(speed), channels=channels,
+                                 at_frame=at_frame, source=SOURCE)
+
+    # -------------------------------------------------------------- queries
+    def _on_get(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "setting name")
+        name = _string(msg, 0, "setting")
+        fields = ("intensity", "balance", "glide", "mute", "preset")
+        if name not in fields and name != "texture":
+            raise ParameterError(f"unknown setting {name!r}; known: {', '.join(fields + ('texture',))}")
+        states = self.controller.state()
+        chans = range(len(states)) if channels is None else channels
+
+        def values(ch: int) -> tuple:
+            s = states[ch]
+            if name == "texture":
+                return (s.intensity, s.balance)
+            return ({"intensity": s.intensity, "balance": s.balance, "glide": s.glide_s,
+                     "mute": s.muted, "preset": s.preset}[name],)
+
+        per_channel = {ch: values(ch) for ch in chans}
+        if channels is None and len(set(per_channel.values())) == 1:
+            targets: list[tuple[int | None, tuple]] = [(None, per_channel[0])]
+        else:
+            targets = list(per_channel.items())
+        for ch, vals in targets:
+            if name == "texture":
+                base = self.prefix if ch is None else f"{self.prefix}/ch/{ch + 1}"
+                peer.send(encode_message(f"{base}/texture", vals, "ff"))
+            else:
+                peer.send(setter_message(self.prefix, ch, name, vals[0]))
+
+    def status_pairs(self) -> list[tuple[str, object]]:
+        """The ``/status.reply`` content as ``(key, value)`` pairs (-1 = not known)."""
+        engine = self.engine
+        ctl = self.controller
+        pairs: list[tuple[str, object]] = [
+            ("version", __version__),
+            ("channels", int(ctl.channels)),
+            ("rate", float(getattr(engine, "fs", -1.0))),
+            ("block_size", int(_engine_stat(engine, ("block_size", "blocksize", "block_frames"), self.block_size or -1))),
+            ("underflows", int(_engine_stat(engine, ("underflows", "xruns", "underruns"), -1))),
+            ("load", float(_engine_stat(engine, ("render_load", "load_avg", "load", "cpu_load"), -1.0))),
+            ("load_peak", float(_engine_stat(engine, ("load_peak",), -1.0))),
+            ("late_commands", int(_engine_stat(engine, ("late_commands",), -1))),
+            ("uptime", float(time.monotonic() - ctl.started_at)),
+            ("frame", int(_engine_stat(engine, ("frame_position",), -1))),
+            ("messages", self.stats.messages),
+            ("scheduled", self.stats.scheduled),
+            ("malformed", self.stats.malformed),
+            ("errors", int(sum(ctl.error_counts.values()))),
+            ("subscribers", len(self.notifier) if self.notifier is not None else 0),
+        ]
+        if self.extra_status is not None:
+            pairs.extend(self.extra_status())
+        for ch, s in enumerate(ctl.state()):
+            pairs += [(f"ch{ch + 1}.intensity", float(s.intensity)), (f"ch{ch + 1}.balance", float(s.balance)),
+                      (f"ch{ch + 1}.glide", float(s.glide_s * 1000.0)), (f"ch{ch + 1}.mute", int(s.muted)),
+                      (f"ch{ch + 1}.preset", s.preset or "")]
+        return pairs
+
+    def _on_status(self, msg: Message, channels, peer, at_frame) -> None:
+        args: list[object] = []
+        for key, value in self.status_pairs():
+            args += [key, value]
+        self._reply(peer, f"{self.prefix}/status.reply", args)
+
+    def _on_ping(self, msg: Message, channels, peer, at_frame) -> None:
+        try:
+            data = encode_message(f"{self.prefix}/pong", msg.args, msg.types)
+        except (ParameterError, TypeError):
+            data = encode_message(f"{self.prefix}/pong")
+        peer.send(data)
+
+    def _on_sync(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (0, 1), "sync id")
+        sync_id = int(_number(msg, 0, "sync id")) if msg.args else 0
+        if not -(2**31) <= sync_id < 2**31:
+            raise ParameterError("sync id must fit in 32 bits")
+        worker = self.sync_worker
+        if worker is None:
+            self.reply_synced(peer, sync_id, self.controller.sync(timeout_s=1.0))
+        elif worker.idle and self.controller.sync(timeout_s=0.0):
+            self.reply_synced(peer, sync_id, True)  # already applied: answer now
+        else:
+            worker.submit(peer, sync_id)
+
+    def reply_synced(self, peer: PeerLike, sync_id: int, ok: bool) -> None:
+        """Send ``/synced id`` (or an error when the engine did not catch up)."""
+        if ok:
+            self._reply(peer, f"{self.prefix}/synced", (sync_id,), "i")
+        else:
+            self._error(peer, f"{self.prefix}/sync", f"engine did not apply the commands before sync {sync_id} in time",
+                        "osc.sync_timeout")
+
+    def _on_notify(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "1 = subscribe, 0 = unsubscribe")
+        on = _flag(msg, 0, "notify")
+        if self.notifier is None:
+            raise VibsynthError("notifications are not available")
+        if on and not self.notifier.subscribe(peer):
+            raise VibsynthError(f"too many notify subscribers (max {self.notifier.max_subscribers})")
+        if not on:
+            self.notifier.unsubscribe(peer)
+        self._reply(peer, f"{self.prefix}/done", (f"{self.prefix}/notify", int(on)), "si")
+
+    def _on_learn(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "knob name")
+        name = _string(msg, 0, "knob")
+        learn = getattr(self.controller, "learn", None)
+        if not callable(learn):
+            learn = _midi_learn_hook()
+        if learn is None or learn(name) is False:
+            raise VibsynthError("MIDI learn unavailable (no MIDI input is running)")
+        self._reply(peer, f"{self.prefix}/done", (f"{self.prefix}/learn", name), "ss")
+
+
+def _midi_learn_hook() -> Callable[[str], bool] | None:
+    """``vibsynth.control.midi.learn`` when the MIDI adapter is installed, else None."""
+    try:
+        from vibsynth.control import midi
+    except Exception:  # noqa: BLE001 - MIDI is optional (python-rtmidi may be missing)
+        return None
+    hook = getattr(midi, "learn", None)
+    return hook if callable(hook) else None
+
+
+def _engine_stat(engine: Any, names: Sequence[str], default: float) -> float:
+    """First available engine statistic among ``names`` (attributes or a ``stats`` mapping/method)."""
+    stats = getattr(engine, "stats", None)
+    try:
+        if callable(stats):
+            stats = stats()
+    except Exception:  # noqa: BLE001 - the engine is optional here, never let status fail
+        stats = None
+    for name in names:
+        value = None
+        if isinstance(stats, dict):
+            value = stats.get(name)
+        elif stats is not None:
+            value = getattr(stats, name, None)
+        if value is None:
+            value = getattr(engine, name, None)
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+            return value
+    return default
+
+
+# ---------------------------------------------------------------------- server
+class OscServer:
+    """The OSC control server: transports + handler + workers (the adapter's ControlServer).
+
+    Parameters
+    ----------
+    controller : Controller
+    host, port : str, int
+    prefix, allow, reply_port, schedule_horizon_s, notify_rate_hz, tcp, speed_curve
+        See the ``osc:`` config section and docs/osc.md.
+    block_size : int, optional
+        Reported in status when the engine does not say.
+    """
+
+    name = "osc"
+
+    def __init__(
+        self,
+        controller: Controller,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 9570,
+        prefix: str = "/vibsynth",
+        allow: Sequence[str] | None = None,
+        reply_port: int | None = None,
+        schedule_horizon_s: float = 10.0,
+        notify_rate_hz: float = 30.0,
+        tcp: bool = False,
+        speed_curve: SpeedCurve | None = None,
+        block_size: int | None = None,
+        rcvbuf: int = DEFAULT_RCVBUF,
+    ) -> None:
+        self.controller = controller
+        self.stats = TransportStats()
+        allow_set = resolve_allow_list(allow)
+        prefix = normalize_prefix(prefix)
+        self.notifier = Notifier(controller, prefix, rate_hz=notify_rate_hz)
+        self.sync_worker = SyncWorker(controller, self._reply_synced, timeout_s=schedule_horizon_s + 2.0)
+        self.handler = OscHandler(
+            controller, prefix=prefix, speed_curve=speed_curve, schedule_horizon_s=schedule_horizon_s,
+            notifier=self.notifier, sync_worker=self.sync_worker, block_size=block_size,
+            extra_status=self._transport_status,
+        )
+        self.udp = UdpTransport(host, port, self.handler.handle_packet, allow=allow_set, reply_port=reply_port,
+                                rcvbuf=rcvbuf, stats=self.stats)
+        self.tcp = (TcpSlipTransport(host, port, self.handler.handle_packet, allow=allow_set, stats=self.stats,
+                                     on_close=self.notifier.unsubscribe)
+                    if tcp else None)
+        self._started = False
+
+    def _reply_synced(self, peer: PeerLike, sync_id: int, ok: bool) -> None:
+        self.handler.reply_synced(peer, sync_id, ok)
+
+    def _transport_status(self) -> list[tuple[str, object]]:
+        s = self.stats
+        return [("packets", s.packets), ("denied", s.denied), ("replies", s.replies),
+                ("send_errors", s.send_errors), ("rcvbuf", self.udp.rcvbuf)]
+
+    @property
+    def port(self) -> int:
+        """The bound UDP port (useful with port 0)."""
+        return self.udp.port
+
+    def start(self) -> None:
+        """Bind the sockets and start the receive, notify and sync threads.
+
+        Raises
+        ------
+        ConfigError
+            If the address cannot be bound (e.g. port in use).
+        """
+        try:
+            self.udp.open()
+            if self.tcp is not None:
+                self.tcp.port = self.udp.port
+                self.tcp.open()
+        except OSError as exc:
+            self.udp.stop()
+            raise ConfigError(f"OSC: cannot listen on {self.udp.host}:{self.udp.port}: {exc.strerror or exc} "
+                              "(set osc.port or --osc-port)") from None
+        self.notifier.start()
+        self.sync_worker.start()
+        self.udp.start()
+        if self.tcp is not None:
+            self.tcp.start()
+        self._started = True
+        log.info("%s", self.describe())
+
+    def stop(self) -> None:
+        """Stop every thread and close the sockets (idempotent)."""
+        self.udp.stop()
+        if self.tcp is not None:
+            self.tcp.stop()
+        self.notifier.stop()
+        self.sync_worker.stop()
+        self.handler.close()
+        self._started = False
+
+    def describe(self) -> str:
+        """One line for the start-up banner."""
+        host = self.udp.host
+        text = f"OSC on udp://{host}:{self.udp.port}{self.handler.prefix or '/'}"
+        if self.tcp is not None:
+            text += f" and tcp://{host}:{self.udp.port} (SLIP)"
+        if self.udp.rcvbuf:
+            text += f", receive buffer {self.udp.rcvbuf // 1024} KiB"
+        if host not in _LOOPBACK:
+            text += ", reachable from the network" + (" (allow-list)" if self.udp.allow else "")
+        return text
+
+
+# ---------------------------------------------------------------------- adapter contract
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--osc-port``, ``--osc-host`` and ``--no-osc`` to the ``vibsynth serve`` parser."""
+    group = parser.add_argument_group("OSC")
+    group.add_argument("--osc-port", type=int, default=None, metavar="PORT",
+                       help="UDP port of the OSC server (default: osc.port, 9570)")
+    group.add_argument("--osc-host", default=None, metavar="HOST",
+                       help="address to listen on (default: osc.host, 127.0.0.1; 0.0.0.0 = every interface)")
+    group.add_argument("--no-osc", action="store_true", default=False, help="do not start the OSC server")
+
+
+def _port(value: Any, key: str) -> int:
+    try:
+        port = int(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{key} must be a port number, got {value!r}") from None
+    if not 0 <= port <= 65535:
+        raise ConfigError(f"{key} {port} is outside [0, 65535]")
+    return port
+
+
+def create(config: Any, args: argparse.Namespace | None, controller: Controller, presets: Any = None) -> OscServer | None:
+    """Build (not start) the OSC server from the config and flags; None when disabled.
+
+    Parameters
+    ----------
+    config : Config
+        Effective configuration (``osc``, ``speed`` and ``audio`` sections are read).
+    args : argparse.Namespace or None
+        Parsed ``vibsynth serve`` flags (``--osc-port``, ``--osc-host``, ``--no-osc``).
+    controller : Controller
+    presets : object, optional
+        The preset library (unused: presets are resolved by the controller).
+
+    Raises
+    ------
+    ConfigError
+        For invalid ``osc``/``speed`` settings.
+    """
+    data = getattr(config, "data", config) or {}
+    osc = dict(data.get("osc") or {})
+    if getattr(args, "no_osc", False) or not osc.get("enabled", True):
+        log.info("OSC server disabled (%s)", "--no-osc" if getattr(args, "no_osc", False) else "osc.enabled: false")
+        return None
+    host = getattr(args, "osc_host", None) or osc.get("host") or "127.0.0.1"
+    port_flag = getattr(args, "osc_port", None)
+    port = _port(port_flag if port_flag is not None else osc.get("port", 9570), "osc.port")
+    reply_port = osc.get("reply_port")
+    reply_port = None if reply_port in (None, "", 0) else _port(reply_port, "osc.reply_port")
+    speed = dict(data.get("speed") or {})
+    curve = SpeedCurve(speed.get("curve", [[0, 0.0], [10, 0.35], [50, 0.6], [150, 0.85], [300, 1.0]]),
+                       speed.get("balance_per_decade", 0.0) or 0.0)
+    try:
+        horizon = float(osc.get("schedule_horizon_s", 10.0))
+        rate = float(osc.get("notify_rate_hz", 30.0))
+    except (TypeError, ValueError):
+        raise ConfigError("osc.schedule_horizon_s and osc.notify_rate_hz must be numbers") from None
+    if not (math.isfinite(horizon) and 0.0 <= horizon <= 3600.0):
+        raise ConfigError(f"osc.schedule_horizon_s {horizon:g} is outside [0, 3600]")
+    if not (math.isfinite(rate) and 0.0 < rate <= 1000.0):
+        raise ConfigError(f"osc.notify_rate_hz {rate:g} is outside (0, 1000]")
+    allow = osc.get("allow") or []
+    if isinstance(allow, str):
+        allow = [allow]
+    block = (data.get("audio") or {}).get("block_size")
+    return OscServer(
+        controller, host=str(host), port=port, prefix=osc.get("prefix", "/vibsynth"), allow=allow,
+        reply_port=reply_port, schedule_horizon_s=horizon, notify_rate_hz=rate, tcp=bool(osc.get("tcp", False)),
+        speed_curve=curve, block_size=int(block) if isinstance(block, int) else None,
+    )
