@@ -481,7 +481,7 @@ def _knob_limits(data: dict[str, Any]) -> Any:
 
 
 def render_midi_file(path: str | os.PathLike[str], *, config: Any, basis: Any = None, seconds: float | None = None,
-                     presets: Any = None, block: int = 1024) -> tuple[Any, float]:
+                     presets: Any = None, block: int = 1024, engine: Any = None) -> tuple[Any, float]:
     """Render a MIDI file (CC automation and notes) offline through the live mapping.
 
     Every message is applied at its exact sample (``at_frame``), so the result
@@ -500,6 +500,9 @@ def render_midi_file(path: str | os.PathLike[str], *, config: Any, basis: Any = 
         For program changes.
     block : int
         Render block size (frames).
+    engine : Engine, optional
+        A fresh engine to render with (tests, benchmarks); default
+        ``vibsynth.service.build_engine(config, basis=basis)``.
 
     Returns
     -------
@@ -515,14 +518,16 @@ def render_midi_file(path: str | os.PathLike[str], *, config: Any, basis: Any = 
 
     from vibsynth.control.controller import Controller
     from vibsynth.errors import InputError
-    from vibsynth.service import build_engine
 
     try:
         midi_file = mido.MidiFile(str(path))
     except (OSError, ValueError, EOFError, KeyError, IndexError) as exc:
         raise InputError(f"{path}: not a readable MIDI file ({_one_line(exc)})") from None
     data = config.data
-    engine = build_engine(config, basis=basis)
+    if engine is None:
+        from vibsynth.service import build_engine
+
+        engine = build_engine(config, basis=basis)
     knobs = data.get("knobs") or {}
     controller = Controller(engine, limits=_knob_limits(data),
                             initial_glide_s=float(knobs.get("glide_ms", 20.0)) / 1000.0,
