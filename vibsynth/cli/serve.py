@@ -1,0 +1,109 @@
+"""``vibsynth serve``: run the real-time engine on an audio output, with OSC/MIDI control."""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+ORDER = 5
+
+HELP = """\
+Run the haptic texture engine on an audio output (the actuator) until Ctrl-C.
+
+It starts silent; make it vibrate with e.g.
+  vibsynth send /vibsynth/intensity 0.5     (OSC, in another terminal)
+or start with --intensity 0.5 [--balance 1] or --preset NAME.
+
+Outputs: auto (PortAudio, else a silent null output with a warning), sounddevice
+(PortAudio; an error if it cannot be opened), null (no sound card), wav (-o FILE
+--seconds N: rendered faster than real time).
+"""
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def _unit(text: str) -> float:
+    value = _finite(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{value:g} is outside [0, 1]")
+    return value
+
+
+def _channels(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 1 <= value <= 64:
+        raise argparse.ArgumentTypeError(f"channels must be 1..64, got {value}")
+    return value
+
+
+def _seconds(text: str) -> float:
+    value = _finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"seconds must be > 0, got {value:g}")
+    return value
+
+
+def _device(text: str) -> int | str:
+    return int(text) if text.strip().isdigit() else text
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("serve", help="run the real-time engine (audio output + OSC/MIDI control)",
+                              description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    try:
+        from vibsynth.config import add_config_arguments
+    except ImportError:
+        p.add_argument("--config", metavar="FILE.yaml", type=Path, help="user config file")
+    else:
+        add_config_arguments(p)
+    p.add_argument("--preset", metavar="NAME", help="start with this preset")
+    p.add_argument("--balance", type=_finite, metavar="B", help="initial balance (knob units)")
+    p.add_argument("--intensity", type=_unit, metavar="I", help="initial intensity 0..1 (default 0: silent)")
+    p.add_argument("--channels", type=_channels, metavar="N", help="actuator channels (default audio.channels)")
+    p.add_argument("--output", choices=("auto", "sounddevice", "null", "wav"), default=None,
+                   help="output backend (default audio.backend, auto)")
+    p.add_argument("--device", type=_device, metavar="NAME|INDEX",
+                   help="audio output device (name substring or index; see `vibsynth devices`)")
+    p.add_argument("--seconds", type=_seconds, metavar="S", help="stop after S seconds")
+    p.add_argument("-o", dest="wav", metavar="FILE.wav", help="file of the wav output")
+    from vibsynth.control import adapter_modules
+
+    for module in adapter_modules():
+        module.add_arguments(p)
+    p.set_defaults(func=run)
+
+
+def _config(args: argparse.Namespace) -> Any:
+    extra = {"audio.channels": args.channels, "audio.backend": args.output, "audio.device": args.device}
+    if args.wav and args.output is None:
+        extra["audio.backend"] = "wav"
+    try:
+        from vibsynth.config import config_from_args
+    except ImportError:
+        from vibsynth.config import load_config
+
+        nested: dict[str, dict[str, Any]] = {}
+        for key, value in extra.items():
+            if value is not None:
+                section, name = key.split(".")
+                nested.setdefault(section, {})[name] = value
+        return load_config(getattr(args, "config", None), overrides=nested or None)
+    return config_from_args(args, extra=extra)
+
+
+def run(args: argparse.Namespace) -> int:
+    from vibsynth.service import serve
+
+    return serve(_config(args), args)
