@@ -219,10 +219,12 @@ def number(low: float | None = None, high: float | None = None, *, integer: bool
     def check(value: Any) -> str | None:
         if value is None:
             return None if nullable else "must not be null"
-        if not _is_number(value) or (integer and not float(value).is_integer()):
+        if not _is_number(value):
             return f"must be {kind}"
         if not math.isfinite(float(value)):
             return "must be finite"
+        if integer and not float(value).is_integer():
+            return f"must be {kind}"
         v = float(value)
         if (low is not None and (v < low or (low_open and v == low))) or (high is not None and v > high):
             return f"outside the allowed range {rng}" + (f" {unit}" if unit else "")
@@ -483,9 +485,15 @@ def _close(key: str, candidates: list[str]) -> str:
     return f"; did you mean {', '.join(near)}?" if near else ""
 
 
-def _validate_layer(values: Mapping[str, Any], where: Callable[[str], str], *, what: str = "key") -> None:
+#: Keys where YAML ``null`` (unquoted) means the string "null" (e.g. the null audio backend).
+_NULL_MEANS_STRING = {"audio.backend"}
+
+
+def _validate_layer(values: dict[str, Any], where: Callable[[str], str], *, what: str = "key") -> None:
     """Check each dotted leaf of one layer; ``where(dotted)`` gives ``file:line`` for messages."""
-    for dotted, value in values.items():
+    for dotted, value in list(values.items()):
+        if dotted in _NULL_MEANS_STRING and value is None:
+            values[dotted] = value = "null"  # type: ignore[index]
         spec = SCHEMA.get(dotted)
         if spec is None:
             if dotted in _SECTIONS:
@@ -518,30 +526,32 @@ def _check_sections(data: Any, doc: YamlDocument, prefix: Path_ = ()) -> None:
 
 # --------------------------------------------------------------------------- cross-field rules
 def _cross_check(data: Mapping[str, Any], sources: Mapping[str, str]) -> None:
-    def fail(key: str, message: str) -> None:
-        raise ConfigError(f"{sources.get(key, 'config')}: {message}")
+    def fail(key: str | tuple[str, ...], message: str) -> None:
+        keys = (key,) if isinstance(key, str) else key
+        # blame the value a person set (file, env, command line) rather than a default
+        chosen = next((k for k in keys if not sources.get(k, "default").startswith("default")), keys[0])
+        raise ConfigError(f"{sources.get(chosen, 'config')}: {message}")
 
     audio, bank, knobs = data["audio"], data["bank"], data["knobs"]
     if audio["channel_map"] is not None and len(audio["channel_map"]) != audio["channels"]:
-        fail("audio.channel_map", f"audio.channel_map = {audio['channel_map']}: has {len(audio['channel_map'])} "
+        fail(("audio.channel_map", "audio.channels"), f"audio.channel_map = {audio['channel_map']}: has {len(audio['channel_map'])} "
              f"entries but audio.channels = {audio['channels']} (allowed: one device output per channel)")
     if bank["balance_min"] >= bank["balance_max"]:
-        fail("bank.balance_max", f"bank.balance_max = {bank['balance_max']} must be above bank.balance_min = "
+        fail(("bank.balance_max", "bank.balance_min"), f"bank.balance_max = {bank['balance_max']} must be above bank.balance_min = "
              f"{bank['balance_min']}")
     if knobs["balance_min"] >= knobs["balance_max"]:
-        fail("knobs.balance_max", f"knobs.balance_max = {knobs['balance_max']} must be above knobs.balance_min = "
+        fail(("knobs.balance_max", "knobs.balance_min"), f"knobs.balance_max = {knobs['balance_max']} must be above knobs.balance_min = "
              f"{knobs['balance_min']}")
     if knobs["balance_min"] < bank["balance_min"] or knobs["balance_max"] > bank["balance_max"]:
-        key = "knobs.balance_min" if knobs["balance_min"] < bank["balance_min"] else "knobs.balance_max"
-        fail(key, f"live balance range [{knobs['balance_min']:g}, {knobs['balance_max']:g}] (knobs) must lie "
+        fail(("knobs.balance_min", "knobs.balance_max", "bank.balance_min", "bank.balance_max"), f"live balance range [{knobs['balance_min']:g}, {knobs['balance_max']:g}] (knobs) must lie "
              f"within the bank's grid [{bank['balance_min']:g}, {bank['balance_max']:g}] (bank.balance_min/max)")
     if not knobs["balance_min"] <= knobs["initial_balance"] <= knobs["balance_max"]:
-        fail("knobs.initial_balance", f"knobs.initial_balance = {knobs['initial_balance']}: outside the live range "
+        fail(("knobs.initial_balance", "knobs.balance_min", "knobs.balance_max"), f"knobs.initial_balance = {knobs['initial_balance']}: outside the live range "
              f"[{knobs['balance_min']:g}, {knobs['balance_max']:g}] (knobs.balance_min/max)")
     channels = audio["channels"]
     for midi_channel, target in data["midi"]["channel_map"].items():
         if isinstance(target, list) and max(target) > channels:
-            fail("midi.channel_map", f"midi.channel_map = {data['midi']['channel_map']}: MIDI channel {midi_channel} "
+            fail(("midi.channel_map", "audio.channels"), f"midi.channel_map = {data['midi']['channel_map']}: MIDI channel {midi_channel} "
                  f"targets actuator channel {max(target)} but audio.channels = {channels} (allowed: 1..{channels})")
     profile = data["actuator"]["profile"]
     if profile is not None and data["actuator"]["response"] is None:

@@ -316,9 +316,20 @@ _HEADER = "# vibsynth preset (schema: docs/presets.md). Edit freely; saved atomi
 
 def preset_to_yaml(preset: Preset, *, header: str = _HEADER) -> str:
     """YAML text of a preset (keys in schema order)."""
-    body = yaml.safe_dump(preset.to_dict(), sort_keys=False, allow_unicode=True, width=100,
-                          default_flow_style=None)
-    return header + body
+    return header + _dump_block(preset.to_dict())
+
+
+def _dump_block(data: Mapping[str, Any], indent: str = "") -> str:
+    """Block-style mapping at the top levels, short lists and leaf mappings inline: easy to hand-edit."""
+    out = []
+    for key, value in data.items():
+        if isinstance(value, Mapping) and value:
+            out.append(f"{indent}{key}:\n" + _dump_block(value, indent + "  "))
+            continue
+        text = yaml.safe_dump({key: value}, sort_keys=False, allow_unicode=True, width=100, 
+                             default_flow_style=None if isinstance(value, list) else False)
+        out.append("".join(indent + line if line.strip() else line for line in text.splitlines(keepends=True)))
+    return "".join(out)
 
 
 def save_preset(preset: Preset, path: str | os.PathLike[str] | None = None, *, header: str = _HEADER) -> Path:
