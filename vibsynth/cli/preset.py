@@ -238,7 +238,10 @@ def render_preset(config: Config, library: PresetLibrary, name: str, seconds: fl
 
 
 def cmd_play(args: argparse.Namespace) -> int:
-    config = config_from_args(args, extra={"audio.channels": args.channels})
+    device: Any = args.device
+    if isinstance(device, str) and device.isdigit():
+        device = int(device)
+    config = config_from_args(args, extra={"audio.channels": args.channels, "audio.device": device})
     library = load_library(config)
     preset = library.get(args.name)
     if args.output is not None:
@@ -261,19 +264,16 @@ def cmd_play(args: argparse.Namespace) -> int:
     knobs = config.section("knobs")
     controller = Controller(engine, limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),
                             preset_resolver=library.get, initial_glide_s=knobs["glide_ms"] / 1000.0)
-    output = open_output(config, engine, args.device)
+    output = open_output(config, engine, args.device is not None)
+    output.start()
     try:
-        if hasattr(output, "start"):
-            output.start()
         controller.load_preset(preset.name, source="cli")
-        print(f"playing {preset.name} for {args.seconds:g} s (Ctrl-C stops)", file=sys.stderr)
+        print(f"playing {preset.name} for {args.seconds:g} s on {output.describe()} (Ctrl-C stops)", file=sys.stderr)
         time.sleep(args.seconds)
         controller.panic(source="cli")
-        time.sleep(max(0.05, knobs["mute_fade_ms"] / 1000.0 * 2))
+        time.sleep(max(0.05, 2 * knobs["mute_fade_ms"] / 1000.0))
     finally:
-        for method in ("stop", "close"):
-            if hasattr(output, method):
-                getattr(output, method)()
+        output.stop()
     return 0
 
 
