@@ -277,3 +277,13 @@ def test_user_actuator_profile_and_its_errors(tmp_path):
         resolve_actuator_response(config)
     (folder / "mine.yaml").write_text("name: mine\nresponse: [[40, 0], [50, 3]]\n")
     assert resolve_actuator_response(config) == [(40.0, 0.0), (50.0, 3.0)]
+
+
+def test_docs_list_every_key_and_env_var():
+    text = (ROOT / "docs" / "config.md").read_text(encoding="utf-8")
+    missing = [key for key in SCHEMA if f"`{key}`" not in text] + [var for var in ENV_VARS if f"`{var}`" not in text]
+    assert not missing, f"docs/config.md does not document: {missing}"
+
+
+def test_backend_null_in_yaml_means_the_null_backend(tmp_path):
+    assert check_config_file(write(tmp_path, "audio:\n  backend: null\n")).get("audio.backend") == "null"
