@@ -340,6 +340,30 @@ def test_watcher_reapplies_through_controller(dirs):
     assert knobs == {("balance", 0.7, (1,), 0.1), ("intensity", 0.8, (1,), 0.1)}
 
 
+def test_removed_playing_preset_logs_a_warning_and_keeps_playing(dirs, caplog):
+    from vibsynth.control.controller import Controller
+
+    class FakeEngine:
+        channels, fs = 1, 48000.0
+        applied_seq = frame_position = 0
+
+        def submit(self, command) -> int:
+            return 1
+
+    shipped, user = dirs
+    user.mkdir()
+    save_preset(Preset("solo", 0.4, 0.3), user / "solo.yaml")
+    lib = PresetLibrary(shipped, user)
+    controller = Controller(FakeEngine(), preset_resolver=lib.get)
+    controller.load_preset("solo")
+    watcher = PresetWatcher(lib, lambda name: controller.reapply_preset(name))
+    (user / "solo.yaml").unlink()
+    with caplog.at_level(logging.WARNING, logger="vibsynth.presets"):
+        assert watcher.poll() == {"solo": "removed"}
+    assert "preset 'solo' removed: unknown preset 'solo'" in caplog.text and "Traceback" not in caplog.text
+    assert controller.get("intensity") == 0.4  # still playing
+
+
 def test_watcher_rejects_bad_interval(dirs):
     with pytest.raises(PresetError, match="outside the allowed range"):
         PresetWatcher(PresetLibrary(*dirs), print, interval_s=0)

@@ -34,7 +34,7 @@ from typing import Any, Callable, Iterable, Mapping
 import yaml
 
 from vibsynth.config import Config, YamlDocument, parse_yaml
-from vibsynth.errors import PresetError
+from vibsynth.errors import PresetError, VibsynthError
 from vibsynth.io import atomic_write_text
 
 __all__ = [
@@ -598,6 +598,8 @@ class PresetWatcher:
             log.info("preset %r %s", name, kind)
             try:
                 self.on_change(name)
+            except VibsynthError as exc:  # e.g. a removed preset that was playing: keep what plays
+                log.warning("preset %r %s: %s", name, kind, exc)
             except Exception:  # noqa: BLE001 - a callback bug must not stop hot reload
                 log.exception("preset %r: on_change callback failed", name)
         return changes
