@@ -34,6 +34,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -360,10 +361,17 @@ def _lasso(x: NDArray[np.float64], y: NDArray[np.float64], *, cv: int, seed: int
 
     folds = KFold(cv, shuffle=True, random_state=seed)
     if solver == "lars":
-        model = LassoLarsCV(cv=folds, positive=positive, max_iter=1000)
-    else:
-        model = LassoCV(cv=folds, positive=positive, max_iter=10000, alphas=50, precompute=True)
-    return model.fit(x, y)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return LassoLarsCV(cv=folds, positive=positive, max_iter=1000).fit(x, y)
+        except (ValueError, FloatingPointError):
+            # LARS has no path when (with positive=True) no feature correlates positively
+            # with the ratings in some fold; coordinate descent handles that case.
+            pass
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return LassoCV(cv=folds, positive=positive, max_iter=10000, alphas=50, precompute=True).fit(x, y)
 
 
 def _fit_scaled(
