@@ -1,0 +1,175 @@
+"""Shared JACK helpers for end-to-end tests: is a server reachable, capture output ports into numpy.
+
+Usage (typical PortAudio test)::
+
+    require_jack()                       # skip, or fail when VIBSYNTH_E2E_REQUIRED=1
+    output.open()                        # PortAudio registers its ports at open ...
+    with JackCapture(seconds=2.0) as cap:
+        cap.connect(portaudio_output_ports(cap.client)[:1])   # ... connect before start
+        output.start()
+        cap.arm(); cap.wait()
+    x = cap.data[:, 0]                   # float32, shape (frames, n_ports)
+
+:meth:`JackCapture.frame_time_now` and :attr:`JackCapture.start_frame` put
+captured samples and events on the same JACK frame clock (for latency).
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from typing import Sequence
+
+import numpy as np
+
+__all__ = [
+    "E2E_REQUIRED_ENV",
+    "e2e_required",
+    "jack_server_available",
+    "require_jack",
+    "JackCapture",
+    "portaudio_output_ports",
+    "capture",
+]
+
+E2E_REQUIRED_ENV = "VIBSYNTH_E2E_REQUIRED"
+
+
+def e2e_required() -> bool:
+    """True when CI demands the e2e tests run (``VIBSYNTH_E2E_REQUIRED=1``)."""
+    return os.environ.get(E2E_REQUIRED_ENV, "") == "1"
+
+
+def jack_server_available() -> tuple[bool, str]:
+    """(reachable, reason): can a JACK client connect to the (default or $JACK_DEFAULT_SERVER) server?"""
+    try:
+        import jack
+    except Exception as exc:  # JACK-Client or libjack missing
+        return False, f"JACK-Client is not usable ({exc})"
+    try:
+        client = jack.Client("vibsynth-probe", no_start_server=True)
+    except Exception as exc:
+        server = os.environ.get("JACK_DEFAULT_SERVER", "default")
+        return False, f"no JACK server '{server}' is running ({exc}); run under scripts/with_jack.sh"
+    client.close()
+    return True, ""
+
+
+def require_jack() -> None:
+    """Skip the calling test when no JACK server is reachable; fail instead under VIBSYNTH_E2E_REQUIRED=1."""
+    import pytest
+
+    ok, reason = jack_server_available()
+    if ok:
+        return
+    if e2e_required():
+        pytest.fail(f"{E2E_REQUIRED_ENV}=1 but {reason}")
+    pytest.skip(reason)
+
+
+def portaudio_output_ports(client, pattern: str = "PortAudio") -> list[str]:
+    """Names of the audio output ports of PortAudio clients (e.g. ``PortAudio:out_0``), sorted."""
+    ports = client.get_ports(name_pattern=pattern, is_audio=True, is_output=True)
+    return sorted(p.name for p in ports)
+
+
+class JackCapture:
+    """A JACK client with input ports that records a fixed number of seconds once armed.
+
+    Parameters
+    ----------
+    seconds : float
+        Capacity (and length of a full capture).
+    n_ports : int
+        Input ports (``in_1`` ..).
+    name : str
+        JACK client name (made unique per instance).
+
+    Attributes
+    ----------
+    data : ndarray, shape (frames, n_ports), float32
+        The captured samples (valid up to :attr:`frames_captured`).
+    start_frame : int or None
+        JACK frame time of ``data[0]``.
+    rate : int
+    """
+
+    _count = 0
+
+    def __init__(self, seconds: float, *, n_ports: int = 1, name: str = "vibsynth-capture") -> None:
+        import jack
+
+        JackCapture._count += 1
+        self.client = jack.Client(f"{name}-{os.getpid()}-{JackCapture._count}", no_start_server=True)
+        self.rate = int(self.client.samplerate)
+        self.inports = [self.client.inports.register(f"in_{k + 1}") for k in range(n_ports)]
+        self.data = np.zeros((int(round(seconds * self.rate)), n_ports), dtype=np.float32)
+        self.frames_captured = 0
+        self.start_frame: int | None = None
+        self._armed = False
+        self._done = threading.Event()
+        self.client.set_process_callback(self._process)
+        self.client.activate()
+
+    def _process(self, frames: int) -> None:
+        if not self._armed or self._done.is_set():
+            return
+        pos = self.frames_captured
+        n = min(frames, self.data.shape[0] - pos)
+        if pos == 0:
+            self.start_frame = self.client.last_frame_time
+        for k, port in enumerate(self.inports):
+            self.data[pos:pos + n, k] = port.get_array()[:n]
+        self.frames_captured = pos + n
+        if self.frames_captured >= self.data.shape[0]:
+            self._done.set()
+
+    def connect(self, sources: Sequence[str]) -> None:
+        """Connect output ports (by name) to this client's inputs, in order."""
+        if len(sources) > len(self.inports):
+            raise ValueError(f"{len(sources)} sources for {len(self.inports)} capture ports")
+        for src, dst in zip(sources, self.inports):
+            self.client.connect(src, dst)
+
+    def reset(self) -> None:
+        """Forget the capture and stop recording (arm again to record anew)."""
+        self._armed = False
+        self._done.clear()
+        self.frames_captured = 0
+        self.start_frame = None
+
+    def arm(self) -> None:
+        """Start recording at the next JACK cycle."""
+        self._armed = True
+
+    def frame_time_now(self) -> int:
+        """The JACK frame clock now (same clock as :attr:`start_frame`)."""
+        return int(self.client.frame_time)
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until full (True) or timeout (False)."""
+        if timeout is None:
+            timeout = self.data.shape[0] / self.rate + 10.0
+        return self._done.wait(timeout)
+
+    def close(self) -> None:
+        try:
+            self.client.deactivate()
+        finally:
+            self.client.close()
+
+    def __enter__(self) -> "JackCapture":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def capture(sources: Sequence[str], seconds: float) -> tuple[np.ndarray, int]:
+    """Record ``seconds`` from output ports now; returns (data (frames, n), rate)."""
+    with JackCapture(seconds, n_ports=len(sources)) as cap:
+        cap.connect(sources)
+        cap.arm()
+        if not cap.wait():
+            raise TimeoutError("JACK capture did not complete (is the server running in real time?)")
+        return cap.data.copy(), cap.rate
