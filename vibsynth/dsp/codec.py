@@ -739,7 +739,8 @@ def quality(
         lb = intensity_frames_db(b, fs=dfs, window_s=window_s, hop_s=hop_s)
     n = min(fa.shape[0], fb.shape[0], la.size, lb.size)
     fa, fb, la, lb = fa[:n], fb[:n], la[:n], lb[:n]
-    loud = np.isfinite(la) & np.isfinite(lb) & (la > SILENCE_DB) & (lb > SILENCE_DB)
+    la, lb = np.maximum(la, SILENCE_DB), np.maximum(lb, SILENCE_DB)  # -inf (silent) -> floor
+    loud = (la > SILENCE_DB) & (lb > SILENCE_DB)
     peak = float(la[loud].max()) if loud.any() else 0.0
     loud &= la > peak - 60.0  # windows far below the peak are noise-floor dominated
     wl = (lb - la)[loud]
