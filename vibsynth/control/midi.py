@@ -446,10 +446,19 @@ class MidiServer:
         with self._lock:
             self.mapper.handle(msg)
 
+    def _list_names(self) -> list[str]:
+        # While open, list through the port's own rtmidi object: creating a new backend
+        # client (what mido.get_input_names does) while holding the GIL can deadlock
+        # against an in-process JACK audio callback.
+        rt = getattr(self._port, "_rt", None)
+        if rt is not None:
+            return list(rt.get_ports())
+        return self._input_names()
+
     def _watch_loop(self) -> None:
         while not self._stop.wait(self.reconnect_interval_s):
             try:
-                names = self._input_names()
+                names = self._list_names()
             except Exception as exc:
                 log.debug("listing MIDI inputs failed: %s", exc)
                 names = []
