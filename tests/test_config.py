@@ -4,6 +4,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import re
+
 import pytest
 
 from vibsynth.config import (
@@ -287,3 +289,24 @@ def test_docs_list_every_key_and_env_var():
 
 def test_backend_null_in_yaml_means_the_null_backend(tmp_path):
     assert check_config_file(write(tmp_path, "audio:\n  backend: null\n")).get("audio.backend") == "null"
+
+
+def test_midi_nrpn_and_range_bindings_are_accepted_and_checked(tmp_path):
+    from vibsynth.config import load_config
+    from vibsynth.errors import ConfigError
+
+    good = tmp_path / "good.yaml"
+    good.write_text("midi:\n  mapping:\n    balance: [{nrpn: [1, 1], range: [-1.0, 1.0]}, {cc: 74}]\n"
+                    "  nrpn: {intensity: [2, 0], balance: 300}\n  cc_glide_max_ms: 50\n")
+    cfg = load_config(good)
+    assert cfg.data["midi"]["mapping"]["balance"][0] == {"nrpn": [1, 1], "range": [-1.0, 1.0]}
+    for text, needle in [
+        ("midi:\n  mapping:\n    balance: [{nrpn: [1, 200]}]\n", "nrpn [1, 200]"),
+        ("midi:\n  mapping:\n    balance: [{cc: 1, nrpn: 2}]\n", "either a cc or an nrpn"),
+        ("midi:\n  mapping:\n    balance: [{cc: 1, range: [1, 0]}]\n", "low < high"),
+        ("midi:\n  nrpn: {pitch: [1, 0]}\n", "unknown knob 'pitch'"),
+    ]:
+        bad = tmp_path / "bad.yaml"
+        bad.write_text(text)
+        with pytest.raises(ConfigError, match=re.escape(needle)):
+            load_config(bad)

@@ -349,22 +349,57 @@ def _midi_channel_map(value: Any) -> str | None:
 _BINDING_KEYS = {"cc": (0, 127), "channel": (1, 16)}
 
 
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _nrpn_problem(value: Any) -> str | None:
+    """An NRPN number: 0..16383, or [msb, lsb] with each 0..127."""
+    if _is_int(value) and 0 <= value <= 16383:
+        return None
+    if isinstance(value, list) and len(value) == 2 and all(_is_int(v) and 0 <= v <= 127 for v in value):
+        return None
+    return f"nrpn {value!r} must be 0..16383 or [msb, lsb] with each 0..127"
+
+
 def _midi_bindings(value: Any) -> str | None:
     if not isinstance(value, list):
-        return "must be a list of bindings like {cc: 74}"
+        return "must be a list of bindings like {cc: 74} or {nrpn: [1, 0]}"
     for i, item in enumerate(value):
-        if not isinstance(item, dict) or "cc" not in item:
-            return f"item {i} ({item!r}) must be a mapping with a cc number, e.g. {{cc: 74}}"
+        if not isinstance(item, dict) or ("cc" in item) == ("nrpn" in item):
+            return f"item {i} ({item!r}) must be a mapping with either a cc or an nrpn number, e.g. {{cc: 74}}"
         for key, val in item.items():
             if key == "invert":
                 if not isinstance(val, bool):
                     return f"item {i}: invert must be true or false"
                 continue
+            if key == "nrpn":
+                problem = _nrpn_problem(val)
+                if problem:
+                    return f"item {i}: {problem}"
+                continue
+            if key == "range":
+                if not (isinstance(val, list) and len(val) == 2 and all(_is_number(v) and math.isfinite(v) for v in val)
+                        and val[0] < val[1]):
+                    return f"item {i}: range {val!r} must be [low, high] with finite low < high"
+                continue
             if key not in _BINDING_KEYS:
-                return f"item {i}: unknown key {key!r} (allowed: cc, channel, invert)"
+                return f"item {i}: unknown key {key!r} (allowed: cc, nrpn, channel, invert, range)"
             lo, hi = _BINDING_KEYS[key]
-            if not (isinstance(val, int) and not isinstance(val, bool) and lo <= val <= hi):
+            if not (_is_int(val) and lo <= val <= hi):
                 return f"item {i}: {key} {val!r} is outside [{lo}, {hi}]"
+    return None
+
+
+def _midi_nrpn(value: Any) -> str | None:
+    if not isinstance(value, dict):
+        return "must be a mapping {intensity: [msb, lsb], balance: [msb, lsb]}"
+    for knob, number_ in value.items():
+        if knob not in ("intensity", "balance"):
+            return f"unknown knob {knob!r} (allowed: intensity, balance)"
+        problem = _nrpn_problem(number_)
+        if problem:
+            return f"{knob}: {problem}"
     return None
 
 
@@ -431,10 +466,14 @@ SCHEMA: dict[str, Spec] = {
     "midi.channel_map": custom("a mapping {MIDI channel 1-16: 'all' or [actuator channels, 1-based]}",
                                _midi_channel_map),
     "midi.mpe": boolean(),
-    "midi.mapping.intensity": custom("a list of bindings like {cc: 11} (cc 0-127, optional channel 1-16, "
-                                     "optional invert)", _midi_bindings),
-    "midi.mapping.balance": custom("a list of bindings like {cc: 74} (cc 0-127, optional channel 1-16, "
-                                   "optional invert)", _midi_bindings),
+    "midi.attack_ms": number(0, 10000, nullable=True, unit="ms"),
+    "midi.cc_glide_max_ms": number(0, 10000, unit="ms"),
+    "midi.reconnect_interval_s": number(0.05, 60, unit="s"),
+    "midi.nrpn": custom("a mapping {intensity: [msb, lsb], balance: [msb, lsb]} (or 0..16383)", _midi_nrpn),
+    "midi.mapping.intensity": custom("a list of bindings like {cc: 11} or {nrpn: [1, 0]} (optional channel 1-16, "
+                                     "invert, range [low, high])", _midi_bindings),
+    "midi.mapping.balance": custom("a list of bindings like {cc: 74} or {nrpn: [1, 1]} (optional channel 1-16, "
+                                   "invert, range [low, high])", _midi_bindings),
     # speed
     "speed.curve": _points("mm/s", 0, False, 0, 1, 2, False, "speed -> intensity"),
     "speed.balance_per_decade": number(-4, 4, unit="(knob units per decade)"),

@@ -71,7 +71,13 @@ def _render_midi(args: argparse.Namespace) -> tuple[np.ndarray, float]:
 
     overrides = {"audio": {"rate": int(args.rate)}} if args.rate else None
     config = load_config(args.config, overrides=overrides)
-    return render_midi_file(args.midi, config=config, basis=basis_from_args(args), seconds=args.seconds)
+    try:
+        from vibsynth.presets import load_library
+
+        presets = load_library(config)
+    except ImportError:
+        presets = None
+    return render_midi_file(args.midi, config=config, basis=basis_from_args(args), seconds=args.seconds, presets=presets)
 
 
 def run(args: argparse.Namespace) -> int:
