@@ -5,6 +5,7 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import Callable
 
 from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
@@ -12,6 +13,8 @@ from vibsynth.io import default_basis, load_basis
 
 __all__ = [
     "finite_float",
+    "integer_in",
+    "number_in",
     "unit_interval",
     "positive_seconds",
     "sample_rate",
@@ -35,30 +38,45 @@ def finite_float(text: str) -> float:
     return value
 
 
-def unit_interval(text: str) -> float:
-    """A number in [0, 1] (the intensity knob)."""
-    value = finite_float(text)
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"{value:g} is outside [0, 1]")
-    return value
+def integer_in(low: int, high: int | None = None, *, what: str = "") -> Callable[[str], int]:
+    """An argparse type: an integer within [low, high] (``high=None``: no upper bound)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if value < low or (high is not None and value > high):
+            span = f"{low}..{high}" if high is not None else f">= {low}"
+            raise argparse.ArgumentTypeError(f"{what + ' ' if what else ''}{value} is outside {span}")
+        return value
+
+    return parse
 
 
-def positive_seconds(text: str) -> float:
-    """A duration in seconds, > 0 and at most an hour."""
-    value = finite_float(text)
-    if not 0.0 < value <= MAX_SECONDS:
-        raise argparse.ArgumentTypeError(f"{value:g} s is outside (0, {MAX_SECONDS:g}] s")
-    return value
+def number_in(low: float, high: float, *, unit: str = "", low_open: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number within [low, high] (``low_open``: (low, high])."""
+
+    def parse(text: str) -> float:
+        value = finite_float(text)
+        if (value <= low if low_open else value < low) or value > high:
+            suffix = f" {unit}" if unit else ""
+            raise argparse.ArgumentTypeError(
+                f"{value:g}{suffix} is outside {'(' if low_open else '['}{low:g}, {high:g}]{suffix}"
+            )
+        return value
+
+    return parse
 
 
-def sample_rate(text: str) -> float:
-    """A sample rate in Hz within [2400, 768000]."""
-    value = finite_float(text)
-    if not MIN_RATE_HZ <= value <= MAX_RATE_HZ:
-        raise argparse.ArgumentTypeError(
-            f"{value:g} Hz is outside [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz (the bank reaches 1000 Hz)"
-        )
-    return value
+unit_interval = number_in(0.0, 1.0)
+unit_interval.__doc__ = "A number in [0, 1] (the intensity knob)."
+
+
+#: A duration in seconds, > 0 and at most an hour (renders).
+positive_seconds = number_in(0.0, MAX_SECONDS, unit="s", low_open=True)
+#: A sample rate in Hz within [2400, 768000] (the bank reaches 1000 Hz).
+sample_rate = number_in(MIN_RATE_HZ, MAX_RATE_HZ, unit="Hz")
 
 
 def add_basis_argument(parser: argparse.ArgumentParser) -> None:

@@ -3,14 +3,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
-from vibsynth.cli._common import add_basis_argument, basis_from_args, finite_float, sample_rate
+from vibsynth.cli._common import add_basis_argument, basis_from_args, finite_float, integer_in, number_in, sample_rate
 from vibsynth.errors import InputError, ParameterError
 
 ORDER = 55
@@ -18,21 +16,8 @@ ORDER = 55
 PAPER_RATE_HZ = 2800.0
 
 
-def _bits(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if not 2 <= value <= 16:
-        raise argparse.ArgumentTypeError(f"{value} bits is outside 2..16")
-    return value
-
-
-def _ms(text: str) -> float:
-    value = finite_float(text)
-    if not 5.0 <= value <= 10000.0:
-        raise argparse.ArgumentTypeError(f"{value:g} ms is outside [5, 10000] ms")
-    return value
+_bits = integer_in(2, 16, what="bits")
+_ms = number_in(5.0, 10000.0, unit="ms")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

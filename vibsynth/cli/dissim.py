@@ -5,19 +5,12 @@ import argparse
 import json
 from pathlib import Path
 
-from vibsynth.cli._common import Progress, add_basis_argument, basis_from_args, sample_rate
+from vibsynth.cli._common import Progress, add_basis_argument, basis_from_args, integer_in, sample_rate
 
 ORDER = 52
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} must be >= 1")
-    return value
+_positive_int = integer_in(1)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

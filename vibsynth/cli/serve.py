@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 from typing import Any
+
+from vibsynth.cli._common import finite_float, integer_in, number_in, unit_interval
 
 ORDER = 5
 
@@ -21,38 +22,9 @@ Outputs: auto (PortAudio, else a silent null output with a warning), sounddevice
 """
 
 
-def _finite(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
-
-
-def _unit(text: str) -> float:
-    value = _finite(text)
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"{value:g} is outside [0, 1]")
-    return value
-
-
-def _channels(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if not 1 <= value <= 64:
-        raise argparse.ArgumentTypeError(f"channels must be 1..64, got {value}")
-    return value
-
-
-def _seconds(text: str) -> float:
-    value = _finite(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"seconds must be > 0, got {value:g}")
-    return value
+_channels = integer_in(1, 64, what="channels")
+#: serve --seconds: stop after this long (no upper bound beyond a day).
+_seconds = number_in(0.0, 86400.0, unit="s", low_open=True)
 
 
 def _device(text: str) -> int | str:
@@ -69,8 +41,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     else:
         add_config_arguments(p)
     p.add_argument("--preset", metavar="NAME", help="start with this preset")
-    p.add_argument("--balance", type=_finite, metavar="B", help="initial balance (knob units)")
-    p.add_argument("--intensity", type=_unit, metavar="I", help="initial intensity 0..1 (default 0: silent)")
+    p.add_argument("--balance", type=finite_float, metavar="B", help="initial balance (knob units)")
+    p.add_argument("--intensity", type=unit_interval, metavar="I", help="initial intensity 0..1 (default 0: silent)")
     p.add_argument("--channels", type=_channels, metavar="N", help="actuator channels (default audio.channels)")
     p.add_argument("--output", choices=("auto", "sounddevice", "null", "wav"), default=None,
                    help="output backend (default audio.backend, auto)")
