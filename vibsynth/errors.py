@@ -14,6 +14,7 @@ __all__ = [
     "PresetError",
     "DeviceError",
     "CodecError",
+    "MissingDependencyError",
 ]
 
 
@@ -43,3 +44,7 @@ class DeviceError(VibsynthError):
 
 class CodecError(VibsynthError):
     """An encoded parameter-trajectory file is corrupt, truncated or of an unknown version."""
+
+
+class MissingDependencyError(VibsynthError, ImportError):
+    """An optional dependency (scikit-learn, matplotlib: ``pip install 'vibsynth[research]'``) is missing."""

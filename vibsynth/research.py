@@ -49,7 +49,7 @@ from vibsynth.dsp.dissimilarity import (
     local_distances,
     procrustes,
 )
-from vibsynth.errors import InputError, ParameterError, VibsynthError
+from vibsynth.errors import InputError, MissingDependencyError, ParameterError, VibsynthError
 
 __all__ = [
     "MissingDependencyError",
@@ -65,10 +65,6 @@ __all__ = [
 ]
 
 _INSTALL_HINT = "pip install 'vibsynth[research]'"
-
-
-class MissingDependencyError(VibsynthError, ImportError):
-    """An optional dependency (scikit-learn, matplotlib) is not installed."""
 
 
 def require_sklearn(what: str = "this analysis") -> Any:
