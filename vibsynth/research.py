@@ -49,7 +49,7 @@ from vibsynth.dsp.dissimilarity import (
     local_distances,
     procrustes,
 )
-from vibsynth.errors import InputError, MissingDependencyError, ParameterError, VibsynthError
+from vibsynth.errors import InputError, MissingDependencyError, ParameterError
 
 __all__ = [
     "MissingDependencyError",
