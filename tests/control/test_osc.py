@@ -647,3 +647,45 @@ def test_tcp_slip_transport():
     finally:
         conn.close()
         server.stop()
+
+
+# ---------------------------------------------------------------------- batches
+def _batch(peer, *messages):
+    return [(encode_message(address, args), peer) for address, *args in messages]
+
+
+def test_batch_coalesces_to_the_last_move(handler, ctl, peer):
+    handler.handle_batch(_batch(peer, *[("/vibsynth/ch/1/intensity", k / 10) for k in range(10)],
+                                ("/vibsynth/ch/1/balance", 1.0), ("/vibsynth/ch/1/balance", 2.0)))
+    assert [(c.name, c.value) for c in ctl.engine.commands] == [("intensity", pytest.approx(0.9)), ("balance", 2.0)]
+    assert handler.stats.messages == 12
+
+
+def test_batch_result_equals_sequential_application(rng, peer):
+    knobs = ["/vibsynth/intensity", "/vibsynth/ch/1/intensity", "/vibsynth/ch/{1,2}/intensity",
+             "/vibsynth/ch/2/texture", "/vibsynth/texture", "/vibsynth/ch/3/speed", "/vibsynth/balance"]
+    for _ in range(50):
+        messages = []
+        for _ in range(int(rng.integers(1, 12))):
+            address = knobs[int(rng.integers(len(knobs)))]
+            if address.endswith("texture"):
+                messages.append((address, float(rng.uniform(0, 1)), float(rng.uniform(-2, 2))))
+            elif address.endswith("speed"):
+                messages.append((address, float(rng.uniform(0, 400))))
+            else:
+                messages.append((address, float(rng.uniform(0, 1))))
+        sequential, batched = make_controller(4), make_controller(4)
+        for data, p in _batch(peer, *messages):
+            OscHandler(sequential).handle_packet(data, p)
+        OscHandler(batched).handle_batch(_batch(peer, *messages))
+        assert batched.state() == sequential.state()
+        assert len(batched.engine.commands) <= len(sequential.engine.commands)
+
+
+def test_batch_flushes_before_queries_and_replies_errors(handler, ctl, peer):
+    handler.handle_batch(_batch(peer, ("/vibsynth/ch/2/intensity", 0.25), ("/vibsynth/ch/2/get", "intensity"),
+                                ("/vibsynth/ch/2/intensity", 7.0), ("/vibsynth/ch/2/intensity", 0.5)))
+    got = [(m.address, m.args) for m in peer.messages()]
+    assert got[0] == ("/vibsynth/ch/2/intensity", (0.25,))
+    assert got[1][0] == "/vibsynth/error" and "outside the allowed range" in got[1][1][1]
+    assert ctl.get("intensity", 1) == 0.5

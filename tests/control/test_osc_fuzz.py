@@ -243,3 +243,26 @@ def test_socket_burst_server_survives():
     finally:
         client.close()
         server.stop()
+
+
+def test_fuzz_batches_match_the_model():
+    """The batching path (coalescing) gives the same state and the same error count."""
+    rng = random.Random(SEED + 4)
+    corpus = Corpus(rng)
+    ctl = make_controller(CHANNELS)
+    handler = OscHandler(ctl, error_reply_rate=1000.0)
+    peer = FakePeer()
+    expected_errors = 0
+    for _ in range(500):
+        batch = []
+        for _ in range(rng.randrange(1, 64)):
+            if rng.random() < 0.5:
+                batch.append((corpus.valid(), peer))
+            else:
+                data, n = corpus.invalid()
+                expected_errors += n
+                batch.append((data, peer))
+        handler.handle_batch(batch)
+        peer.sent.clear()
+    assert knob_state(ctl) == corpus.expected
+    assert handler.stats.errors + handler.stats.malformed == expected_errors

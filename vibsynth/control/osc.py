@@ -22,7 +22,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 from vibsynth import __version__
 from vibsynth.control.controller import Controller, KnobEvent, check_finite, check_range
@@ -62,6 +62,7 @@ log = logging.getLogger(__name__)
 SOURCE = "osc"
 SPEED_SOURCE = "osc-speed"
 _NUMERIC = frozenset("ifdh")
+_COALESCED = frozenset({"intensity", "balance", "texture", "speed"})
 _LOOPBACK = {"127.0.0.1", "::1", "localhost"}
 
 
@@ -290,6 +291,9 @@ class OscHandler:
         }
         # balance set by anything but /speed: the base that the speed shift is added to
         self._base_balance = [s.balance for s in controller.state()]
+        # coalescing of immediate knob moves within one receive batch (see handle_batch)
+        self._batching = False
+        self._pending: dict[tuple, Callable[[], object]] = {}
         self._base_lock = threading.Lock()
         self._unsubscribe: Callable[[], None] | None = None
         if self.speed_curve.balance_per_decade != 0.0:
@@ -326,6 +330,38 @@ class OscHandler:
                 continue
             self.handle_message(message, peer, at)
 
+    def handle_batch(self, items: Iterable[tuple[bytes, PeerLike]]) -> None:
+        """Handle packets that were queued together in the socket, coalescing immediate knob moves.
+
+        Every message is validated (and errors replied) as it comes, but immediate
+        ``intensity``/``balance``/``texture``/``speed`` moves are held until the end of the
+        batch (or until any other method needs the state) and only the last move per
+        address and channel set reaches the engine. The result is exactly the state of
+        sequential application; a server that fell behind catches up without flooding
+        the audio thread with commands it would apply in the same block anyway.
+        """
+        self._batching = True
+        try:
+            for data, peer in items:
+                self.handle_packet(data, peer)
+        finally:
+            self._batching = False
+            self.flush()
+
+    def flush(self) -> None:
+        """Submit the knob moves held back by :meth:`handle_batch`, in last-arrival order."""
+        pending, self._pending = self._pending, {}
+        for submit in pending.values():
+            try:
+                submit()
+            except VibsynthError as exc:  # already validated; only a race could get here
+                self.controller.count_error("osc.invalid_value")
+                log.debug("OSC: deferred knob move failed: %s", exc)
+
+    def _defer(self, key: tuple, submit: Callable[[], object]) -> None:
+        self._pending.pop(key, None)
+        self._pending[key] = submit
+
     def handle_message(self, msg: Message, peer: PeerLike, at_frame: int | None = None) -> None:
         """Route one decoded message (to every method its address pattern matches)."""
         self.stats.messages += 1
@@ -343,6 +379,8 @@ class OscHandler:
         else:
             calls = self.space.group(routes)
         for method, channels in calls:
+            if self._pending and (at_frame is not None or method not in _COALESCED):
+                self.flush()  # keep order with everything that is not coalesced
             try:
                 self._methods[method](msg, channels, peer, at_frame)
             except OscArgumentError as exc:
@@ -390,20 +428,31 @@ class OscHandler:
                 self._base_balance[event.channel] = float(event.value)  # type: ignore[arg-type]
 
     # -------------------------------------------------------------- knob methods
+    def _set_knob(self, name: str, value: float, channels, at_frame) -> None:
+        if self._batching and at_frame is None:
+            value = self.controller.validate_knob(name, value)
+            self._defer((name, channels), lambda: self.controller.set_knob(name, value, channels=channels, source=SOURCE))
+        else:
+            self.controller.set_knob(name, value, channels=channels, at_frame=at_frame, source=SOURCE)
+
     def _on_intensity(self, msg: Message, channels, peer, at_frame) -> None:
         _arg_count(msg, (1,), "intensity 0..1")
-        self.controller.set_knob("intensity", _number(msg, 0, "intensity"), channels=channels,
-                                 at_frame=at_frame, source=SOURCE)
+        self._set_knob("intensity", _number(msg, 0, "intensity"), channels, at_frame)
 
     def _on_balance(self, msg: Message, channels, peer, at_frame) -> None:
         _arg_count(msg, (1,), "balance")
-        self.controller.set_knob("balance", _number(msg, 0, "balance"), channels=channels,
-                                 at_frame=at_frame, source=SOURCE)
+        self._set_knob("balance", _number(msg, 0, "balance"), channels, at_frame)
 
     def _on_texture(self, msg: Message, channels, peer, at_frame) -> None:
         _arg_count(msg, (2,), "intensity, balance")
-        self.controller.set_texture(_number(msg, 0, "intensity"), _number(msg, 1, "balance"),
-                                    channels=channels, at_frame=at_frame, source=SOURCE)
+        intensity, balance = _number(msg, 0, "intensity"), _number(msg, 1, "balance")
+        if self._batching and at_frame is None:
+            self.controller.validate_knob("intensity", intensity)
+            self.controller.validate_knob("balance", balance)
+            self._defer(("texture", channels), lambda: self.controller.set_texture(
+                intensity, balance, channels=channels, source=SOURCE))
+        else:
+            self.controller.set_texture(intensity, balance, channels=channels, at_frame=at_frame, source=SOURCE)
 
     def _on_glide(self, msg: Message, channels, peer, at_frame) -> None:
         _arg_count(msg, (1,), "glide in ms")
@@ -432,6 +481,7 @@ class OscHandler:
             raise ParameterError(f"speed must be >= 0 mm/s, got {speed:g}")
         curve = self.speed_curve
         if curve.balance_per_decade != 0.0:
+            self.flush()
             shift = curve.balance_shift(speed)
             limits = self.controller.limits
             chans = range(self.controller.channels) if channels is None else channels
@@ -441,8 +491,10 @@ class OscHandler:
                 group = tuple(c for c, b in bases.items() if b == value)
                 target = min(max(value + shift, limits.balance_min), limits.balance_max)
                 self.controller.set_knob("balance", target, channels=group, at_frame=at_frame, source=SPEED_SOURCE)
-        self.controller.set_knob("intensity", curve.intensity(speed), channels=channels,
-                                 at_frame=at_frame, source=SOURCE)
+            self.controller.set_knob("intensity", curve.intensity(speed), channels=channels,
+                                     at_frame=at_frame, source=SOURCE)
+            return
+        self._set_knob("intensity", curve.intensity(speed), channels, at_frame)
 
     # -------------------------------------------------------------- queries
     def _on_get(self, msg: Message, channels, peer, at_frame) -> None:
@@ -632,9 +684,9 @@ class OscServer:
             notifier=self.notifier, sync_worker=self.sync_worker, block_size=block_size,
             extra_status=self._transport_status,
         )
-        self.udp = UdpTransport(host, port, self.handler.handle_packet, allow=allow_set, reply_port=reply_port,
+        self.udp = UdpTransport(host, port, self.handler.handle_batch, allow=allow_set, reply_port=reply_port,
                                 rcvbuf=rcvbuf, stats=self.stats)
-        self.tcp = (TcpSlipTransport(host, port, self.handler.handle_packet, allow=allow_set, stats=self.stats,
+        self.tcp = (TcpSlipTransport(host, port, self.handler.handle_batch, allow=allow_set, stats=self.stats,
                                      on_close=self.notifier.unsubscribe)
                     if tcp else None)
         self._started = False

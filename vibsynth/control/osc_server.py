@@ -1,14 +1,17 @@
 """OSC transports: UDP (one receive thread, large receive buffer) and optional TCP with SLIP framing.
 
 Transports know nothing of OSC addresses: they receive packets, drop those from
-clients outside the allow-list (counted), and hand ``(data, peer)`` to a callback
-on their single receive thread. ``peer.send(data)`` replies to the sender (UDP:
+clients outside the allow-list (counted), and hand batches of ``(data, peer)`` to a
+callback on their single receive thread: after waiting for the first packet, the UDP
+thread drains whatever else is already queued in the socket (up to
+:data:`MAX_BATCH`), so the handler can coalesce moves that arrived together. ``peer.send(data)`` replies to the sender (UDP:
 its address, or the configured reply port on its host; TCP: the same connection).
 """
 from __future__ import annotations
 
 import errno
 import logging
+import select
 import selectors
 import socket
 import threading
@@ -35,7 +38,10 @@ DEFAULT_RCVBUF = 4 * 1024 * 1024
 MAX_DATAGRAM = 65536
 _POLL_S = 0.25
 
-PacketHandler = Callable[[bytes, "UdpPeer | TcpPeer"], None]
+MAX_BATCH = 256
+
+BatchHandler = Callable[[list], None]
+"""``handler([(data, peer), ...])``, called on the receive thread."""
 
 
 @dataclass
@@ -172,8 +178,8 @@ class UdpTransport:
     ----------
     host, port : str, int
         Bind address (port 0 picks a free port; see :attr:`port` after :meth:`open`).
-    on_packet : callable
-        ``on_packet(data, peer)``, called on the receive thread.
+    on_batch : callable
+        ``on_batch([(data, peer), ...])``, called on the receive thread.
     allow : frozenset of str or None
         Client IPs accepted (None = all).
     reply_port : int or None
@@ -186,7 +192,7 @@ class UdpTransport:
         self,
         host: str,
         port: int,
-        on_packet: PacketHandler,
+        on_batch: BatchHandler,
         *,
         allow: frozenset[str] | None = None,
         reply_port: int | None = None,
@@ -195,7 +201,7 @@ class UdpTransport:
     ) -> None:
         self.host = host
         self.port = int(port)
-        self.on_packet = on_packet
+        self.on_batch = on_batch
         self.allow = allow
         self.reply_port = reply_port
         self.requested_rcvbuf = rcvbuf
@@ -223,7 +229,7 @@ class UdpTransport:
         except OSError:
             sock.close()
             raise
-        sock.settimeout(_POLL_S)
+        sock.setblocking(False)
         self.rcvbuf = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
         self.port = sock.getsockname()[1]
         self.sock = sock
@@ -264,28 +270,37 @@ class UdpTransport:
         assert sock is not None
         stats = self.stats
         allow = self.allow
+        poller = select.poll()
+        poller.register(sock, select.POLLIN)
         while not self._stop.is_set():
+            if not poller.poll(_POLL_S * 1000):
+                continue
+            batch = []
+            while len(batch) < MAX_BATCH:
+                try:
+                    data, address = sock.recvfrom(MAX_DATAGRAM)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError as exc:
+                    if self._stop.is_set() or exc.errno == errno.EBADF:
+                        return
+                    stats.send_errors += 1  # e.g. ECONNREFUSED reported for an earlier reply
+                    continue
+                stats.packets += 1
+                stats.bytes += len(data)
+                if allow is not None and address[0] not in allow:
+                    stats.denied += 1
+                    log.debug("OSC: dropped a packet from %s (not in osc.allow)", address[0])
+                    continue
+                reply_to = address[:2] if self.reply_port is None else (address[0], self.reply_port)
+                batch.append((data, UdpPeer(address[:2], reply_to, self)))
+            if not batch:
+                continue
             try:
-                data, address = sock.recvfrom(MAX_DATAGRAM)
-            except socket.timeout:
-                continue
-            except OSError as exc:
-                if self._stop.is_set() or exc.errno == errno.EBADF:
-                    return
-                stats.send_errors += 1  # e.g. ECONNREFUSED reported for an earlier reply
-                continue
-            stats.packets += 1
-            stats.bytes += len(data)
-            if allow is not None and address[0] not in allow:
-                stats.denied += 1
-                log.debug("OSC: dropped a packet from %s (not in osc.allow)", address[0])
-                continue
-            reply_to = address[:2] if self.reply_port is None else (address[0], self.reply_port)
-            try:
-                self.on_packet(data, UdpPeer(address[:2], reply_to, self))
+                self.on_batch(batch)
             except Exception:  # the receive thread must survive anything
                 stats.handler_errors += 1
-                log.exception("OSC: handler failed on a packet from %s", address[0])
+                log.exception("OSC: handler failed on a batch of %d packet(s)", len(batch))
 
 
 # ---------------------------------------------------------------------- TCP
@@ -296,7 +311,7 @@ class TcpSlipTransport:
         self,
         host: str,
         port: int,
-        on_packet: PacketHandler,
+        on_batch: BatchHandler,
         *,
         allow: frozenset[str] | None = None,
         max_connections: int = 16,
@@ -305,7 +320,7 @@ class TcpSlipTransport:
     ) -> None:
         self.host = host
         self.port = int(port)
-        self.on_packet = on_packet
+        self.on_batch = on_batch
         self.on_close = on_close
         self.allow = allow
         self.max_connections = max_connections
@@ -402,14 +417,16 @@ class TcpSlipTransport:
                     continue
                 peer, decoder = self._peers[conn]
                 before = decoder.oversized
-                for frame in decoder.feed(chunk):
+                frames = decoder.feed(chunk)
+                self.stats.oversized_frames += decoder.oversized - before
+                for frame in frames:
                     self.stats.packets += 1
                     self.stats.bytes += len(frame)
+                if frames:
                     try:
-                        self.on_packet(frame, peer)
+                        self.on_batch([(frame, peer) for frame in frames])
                     except Exception:
                         self.stats.handler_errors += 1
-                        log.exception("OSC: handler failed on a TCP frame from %s", peer.address[0])
-                self.stats.oversized_frames += decoder.oversized - before
+                        log.exception("OSC: handler failed on TCP frames from %s", peer.address[0])
                 if peer.closed:
                     self._drop(conn)
