@@ -689,3 +689,44 @@ def test_batch_flushes_before_queries_and_replies_errors(handler, ctl, peer):
     assert got[0] == ("/vibsynth/ch/2/intensity", (0.25,))
     assert got[1][0] == "/vibsynth/error" and "outside the allowed range" in got[1][1][1]
     assert ctl.get("intensity", 1) == 0.5
+
+
+# ---------------------------------------------------------------------- vibsynth send
+def test_send_type_inference_and_forcing():
+    from vibsynth.cli.send import convert
+
+    assert convert(["1", "0.5", "-2", "wood", "1e3", "99999999999"], None) == (
+        [1, 0.5, -2, "wood", 1000.0, 99999999999.0], "ifisff")
+    assert convert(["3", "0.5"], "sd") == (["3", 0.5], "sd")
+    assert convert(["7"], ",Ti") == ([7], "Ti")
+    with pytest.raises(ParameterError):
+        convert(["1"], "ff")
+    with pytest.raises(ParameterError):
+        convert(["x"], "i")
+
+
+def test_send_command_prints_replies(capsys):
+    from vibsynth.cli import main
+
+    ctl = make_controller(2)
+    server = osc.OscServer(ctl, port=0)
+    server.start()
+    try:
+        port = str(server.port)
+        assert main(["send", "/vibsynth/ch/2/intensity", "0.5", "--port", port]) == 0
+        assert main(["send", "/vibsynth/ch/2/get", "intensity", "--port", port, "--wait-reply", "5"]) == 0
+        assert capsys.readouterr().out.strip() == "/vibsynth/ch/2/intensity f 0.5"
+        assert main(["send", "/vibsynth/intensity", "nan", "--port", port, "--wait-reply", "5"]) == 1
+        assert "finite" in capsys.readouterr().out
+        assert main(["send", "/vibsynth/intensity", "0.25", "--delay", "0", "--port", port]) == 0
+        assert main(["send", "/vibsynth/sync", "3", "--port", port, "--wait-reply", "5"]) == 0
+        assert capsys.readouterr().out.strip() == "/vibsynth/synced i 3"
+        assert ctl.get("intensity", 0) == 0.25
+    finally:
+        server.stop()
+
+
+def test_send_rejects_bad_address():
+    from vibsynth.cli import main
+
+    assert main(["send", "vibsynth/intensity", "0.5", "--port", "9"]) == 2

@@ -275,6 +275,42 @@ def test_knob_set_over_osc_is_visible_in_jack_output(jack_serve):
     assert silent < 1e-6 and loud > 1e-3
 
 
+def test_timetagged_bundle_starts_on_time(jack_serve):
+    """A bundle timetagged 0.5 s ahead starts the vibration 0.5 s after it was sent (JACK frame clock)."""
+    from tests.e2e.jackutil import JackCapture, portaudio_output_ports
+
+    client = Client(jack_serve)
+    try:
+        client.send("/vibsynth/glide", 0.0)
+        client.request("/vibsynth/sync", 1, expect="/vibsynth/synced")
+        errors = []
+        with JackCapture(7.0) as cap:
+            cap.connect(portaudio_output_ports(cap.client)[:1])
+            cap.arm()
+            time.sleep(0.3)
+            for k in range(6):
+                client.send("/vibsynth/intensity", 0.0)
+                time.sleep(0.2)
+                wall = time.time()
+                frame_sent = cap.frame_time_now()
+                bundle = encode_bundle(unix_to_ntp(wall + 0.5), [encode_message("/vibsynth/intensity", (0.8,), "f")])
+                client.sock.sendto(bundle, client.target)
+                time.sleep(0.7)
+                errors.append((frame_sent, cap))
+            assert cap.wait()
+            data, start, rate = cap.data[:, 0], cap.start_frame, cap.rate
+        offsets = []
+        for frame_sent, _ in errors:
+            expected = frame_sent - start + int(0.5 * rate)
+            onset = np.flatnonzero(np.abs(data[expected - int(0.1 * rate):expected + int(0.1 * rate)]) > 1e-7)
+            assert onset.size, "no onset within 100 ms of the timetag"
+            offsets.append((onset[0] - int(0.1 * rate)) / rate)
+    finally:
+        client.close()
+    print(f"\ntimetag error (onset - timetag): {', '.join(f'{1e3 * o:+.2f} ms' for o in offsets)}")
+    assert all(abs(o) < 0.010 for o in offsets)
+
+
 def test_load_10k_messages_per_second(jack_serve):
     port = jack_serve
     client = Client(port)

@@ -132,12 +132,13 @@ class StreamClock:
 
     The engine publishes ``frame_position`` in whole blocks, so one sample
     ``frame/fs - wall`` is late by up to a block; the estimate keeps the largest
-    (least late) offset seen, decaying slowly (``drift`` s/s) so that a small clock
-    drift between the audio device and the system clock is followed, and resets when
-    the stream jumps (restart).
+    (least late) offset seen, decaying slowly (``drift`` s/s, 1000 ppm: more than sound
+    cards and JACK's dummy driver drift) so that the drift between the audio clock and
+    the system clock is followed, and resets when the stream jumps (restart). The OSC
+    handler samples it with every batch of packets it receives.
     """
 
-    def __init__(self, engine: Any, *, drift: float = 2e-4, reset_s: float = 0.25,
+    def __init__(self, engine: Any, *, drift: float = 1e-3, reset_s: float = 0.25,
                  wall: Callable[[], float] = time.time) -> None:
         self.engine = engine
         self.drift = drift
@@ -342,6 +343,7 @@ class OscHandler:
         """
         self._batching = True
         try:
+            self.clock.sample()  # keep the wall-clock/stream estimate fresh with every batch
             for data, peer in items:
                 self.handle_packet(data, peer)
         finally:

@@ -89,16 +89,16 @@ class TcpPeer:
         return ("tcp", self.address)
 
     def send(self, data: bytes) -> bool:
+        """Queue a SLIP frame on the (non-blocking) connection; a client that stopped reading is dropped."""
         if self.closed:
             return False
         frame = slip_encode(data)
         try:
             with self._lock:
-                self.sock.settimeout(0.05)  # never let a client that stopped reading stall us
                 self.sock.sendall(frame)
             self._stats.replies += 1
             return True
-        except OSError:
+        except OSError:  # BlockingIOError: its buffer is full (possibly mid-frame): drop it
             self._stats.send_errors += 1
             self.closed = True
             return False
