@@ -730,3 +730,27 @@ def test_send_rejects_bad_address():
     from vibsynth.cli import main
 
     assert main(["send", "vibsynth/intensity", "0.5", "--port", "9"]) == 2
+
+
+def test_notify_over_udp_pushes_changes_from_other_sources():
+    ctl = make_controller(1)
+    server = osc.OscServer(ctl, port=0, notify_rate_hz=50.0)
+    server.start()
+    client = _udp_client()
+    try:
+        client.sendto(encode_message("/vibsynth/notify", (1,)), ("127.0.0.1", server.port))
+        seen: dict[str, tuple] = {}
+        while "/vibsynth/done" not in seen or "/vibsynth/ch/1/intensity" not in seen:
+            packet = decode_packet(client.recvfrom(65536)[0])
+            for msg in (packet.elements if isinstance(packet, Bundle) else (packet,)):
+                seen[msg.address] = msg.args
+        assert seen["/vibsynth/ch/1/intensity"] == (0.0,)
+        ctl.set_knob("intensity", 0.75, source="midi")  # not OSC: still pushed
+        while True:
+            msg = decode_packet(client.recvfrom(65536)[0])
+            if isinstance(msg, Message) and msg.address == "/vibsynth/ch/1/intensity":
+                break
+        assert msg.args == (0.75,)
+    finally:
+        client.close()
+        server.stop()

@@ -16,7 +16,6 @@ import socket
 import struct
 import time
 
-import pytest
 
 from tests.control.osc_fakes import FakePeer, make_controller
 from vibsynth.control import osc
