@@ -17,11 +17,16 @@ export JACK_DEFAULT_SERVER="vibsynth-$$"
 export JACK_NO_AUDIO_RESERVATION=1
 jackd -n "$JACK_DEFAULT_SERVER" -R -d dummy -r "$rate" -p "$period" >"/tmp/jackd-$JACK_DEFAULT_SERVER.log" 2>&1 &
 jack_pid=$!
+# Stop the server whatever happens to this script (a killed test run must not leave a
+# real-time jackd behind: a stray one steals the CPU from the next run's audio thread).
+trap 'kill "$jack_pid" 2>/dev/null; wait "$jack_pid" 2>/dev/null' EXIT
+trap 'exit 130' INT TERM
 if ! jack_wait -w -t 10 >/dev/null 2>&1; then
   # Without real-time privileges jackd -R can fail: fall back to a non-RT server.
   kill "$jack_pid" 2>/dev/null; wait "$jack_pid" 2>/dev/null
   jackd -n "$JACK_DEFAULT_SERVER" -d dummy -r "$rate" -p "$period" >"/tmp/jackd-$JACK_DEFAULT_SERVER.log" 2>&1 &
   jack_pid=$!
+  trap 'kill "$jack_pid" 2>/dev/null; wait "$jack_pid" 2>/dev/null' EXIT
   if ! jack_wait -w -t 10 >/dev/null 2>&1; then
     echo "with_jack.sh: jackd did not start; log:" >&2; cat "/tmp/jackd-$JACK_DEFAULT_SERVER.log" >&2
     kill "$jack_pid" 2>/dev/null; exit 1
@@ -29,6 +34,4 @@ if ! jack_wait -w -t 10 >/dev/null 2>&1; then
 fi
 export VIBSYNTH_JACK_RATE=$rate VIBSYNTH_JACK_PERIOD=$period
 "$@"
-status=$?
-kill "$jack_pid" 2>/dev/null; wait "$jack_pid" 2>/dev/null
-exit $status
+exit $?

@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import os
 import threading
-import time
 from typing import Sequence
 
 import numpy as np
+import pytest
 
 __all__ = [
     "E2E_REQUIRED_ENV",
@@ -173,3 +173,9 @@ def capture(sources: Sequence[str], seconds: float) -> tuple[np.ndarray, int]:
         if not cap.wait():
             raise TimeoutError("JACK capture did not complete (is the server running in real time?)")
         return cap.data.copy(), cap.rate
+
+
+#: Marker for real-time checks on a 2-core VM: JACK's dummy driver itself wakes late now and
+#: then, and a non-real-time Python thread holding the GIL can stall the audio callback
+#: (priority inversion). Such a glitch fails one attempt; a real defect fails all three.
+REALTIME = pytest.mark.flaky(reruns=2, reruns_delay=1)

@@ -19,7 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.e2e.jackutil import REALTIME  # noqa: E402
+
 pytestmark = pytest.mark.e2e
+
+
 
 ROOT = Path(__file__).resolve().parents[2]
 BACKEND = "mido.backends.rtmidi/UNIX_JACK"
@@ -126,6 +130,7 @@ RECEIVER = textwrap.dedent("""
 """)
 
 
+@REALTIME
 def test_virtual_input_notes_and_ccs_change_the_output(jack_env, tmp_path):
     out_path = tmp_path / "out.npy"
     receiver = subprocess.Popen([sys.executable, "-c", RECEIVER, "6.0", str(out_path)], cwd=ROOT, env=jack_env,
