@@ -170,18 +170,10 @@ def parse_yaml(text: str, origin: str, *, error: type[Exception] = ConfigError) 
 
 def read_yaml_file(path: str | os.PathLike[str], *, error: type[Exception] = ConfigError) -> YamlDocument:
     """Read and parse a YAML file (see :func:`parse_yaml`); missing/unreadable files raise ``error``."""
+    from vibsynth.io import read_text  # io imports the DSP layer; keep config light to import
+
     p = Path(path).expanduser()
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise error(f"{p}: no such file") from None
-    except IsADirectoryError:
-        raise error(f"{p}: is a folder, expected a YAML file") from None
-    except UnicodeDecodeError:
-        raise error(f"{p}: not a UTF-8 text file") from None
-    except OSError as exc:
-        raise error(f"{p}: cannot read ({exc.strerror})") from None
-    return parse_yaml(text, str(p), error=error)
+    return parse_yaml(read_text(p, error=error), str(p), error=error)
 
 
 # --------------------------------------------------------------------------- field specs

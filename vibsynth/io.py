@@ -30,6 +30,7 @@ __all__ = [
     "read_recording",
     "write_wav",
     "atomic_write_text",
+    "read_text",
     "atomic_write_bytes",
     "PsdTable",
     "read_psd_table",
@@ -284,6 +285,29 @@ def save_basis(basis: Basis, path: str | os.PathLike[str]) -> None:
     atomic_write_text(path, text)
 
 
+def read_text(path: str | os.PathLike[str], *, error: type[Exception] = InputError) -> str:
+    """Read a UTF-8 text file; every reason it cannot be read becomes one ``error`` naming the file.
+
+    Parameters
+    ----------
+    path : path-like
+    error : exception type
+        Raised (with a one-line message) for a missing file, a folder, non-UTF-8 bytes
+        or any other OS error.
+    """
+    p = Path(path).expanduser()
+    try:
+        return p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise error(f"{p}: is a folder, expected a file") from None
+    except UnicodeDecodeError:
+        raise error(f"{p}: not a UTF-8 text file") from None
+    except OSError as exc:
+        raise error(f"{p}: cannot read ({exc.strerror})") from None
+
+
 def load_basis(path: str | os.PathLike[str]) -> Basis:
     """Read a basis YAML file.
 
@@ -292,14 +316,7 @@ def load_basis(path: str | os.PathLike[str]) -> Basis:
     InputError
         Missing file, YAML syntax error or invalid basis (the message names the file).
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{p}: no such file") from None
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read ({exc.strerror})") from None
-    return _basis_from_text(text, str(p))
+    return _basis_from_text(read_text(path), str(Path(path)))
 
 
 def _basis_from_text(text: str, name: str) -> Basis:

@@ -35,7 +35,7 @@ import yaml
 
 from vibsynth.config import Config, YamlDocument, parse_yaml
 from vibsynth.errors import PresetError, VibsynthError
-from vibsynth.io import atomic_write_text
+from vibsynth.io import atomic_write_text, read_text
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -299,14 +299,7 @@ def parse_preset(text: str, origin: str = "<preset>", *, name: str | None = None
 def load_preset(path: str | os.PathLike[str], *, origin: str = "") -> Preset:
     """Read and validate a preset file (its name is the file name without ``.yaml``)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise PresetError(f"{p}: no such file") from None
-    except UnicodeDecodeError:
-        raise PresetError(f"{p}: not a UTF-8 text file") from None
-    except OSError as exc:
-        raise PresetError(f"{p}: cannot read ({exc.strerror})") from None
+    text = read_text(p, error=PresetError)
     stem = p.name[: -len(SUFFIX)] if p.name.endswith(SUFFIX) else p.stem
     return replace(parse_preset(text, str(p), name=stem), path=p, origin=origin)
 

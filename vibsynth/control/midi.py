@@ -37,7 +37,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import mido
 
-from vibsynth.control.midi_mapping import KNOBS, Binding, MidiMapper, MidiSettings
+from vibsynth.control.midi_mapping import KNOBS, Binding, MidiMapper, MidiSettings, check_learn_knob
 from vibsynth.errors import DeviceError, ParameterError
 
 __all__ = [
@@ -155,8 +155,7 @@ def learn(knob: str) -> bool:
     ParameterError
         Unknown knob.
     """
-    if knob not in KNOBS:
-        raise ParameterError(f"cannot learn {knob!r}; knobs are {', '.join(KNOBS)}")
+    check_learn_knob(knob)
     servers = active_servers()
     for server in servers:
         server.learn(knob)

@@ -69,6 +69,12 @@ __all__ = [
 
 KNOBS = ("intensity", "balance")
 
+
+def check_learn_knob(knob: str) -> None:
+    """Raise :class:`ParameterError` unless ``knob`` can be MIDI-learned."""
+    if knob not in KNOBS:
+        raise ParameterError(f"cannot learn {knob!r}; knobs are {', '.join(KNOBS)}")
+
 # Controller numbers with a fixed meaning (never bound, never learned).
 CC_DATA_MSB, CC_DATA_LSB = 6, 38
 CC_DATA_INC, CC_DATA_DEC = 96, 97
@@ -488,8 +494,7 @@ class MidiMapper:
         ParameterError
             Unknown knob.
         """
-        if knob not in KNOBS:
-            raise ParameterError(f"cannot learn {knob!r}; knobs are {', '.join(KNOBS)}")
+        check_learn_knob(knob)
         self._on_learned = on_learned
         self._learn = knob
 
