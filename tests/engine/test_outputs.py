@@ -150,3 +150,60 @@ def _has_osc() -> bool:
     except ImportError:
         return False
     return True
+
+
+class _FakeStream:
+    """A PortAudio stream stand-in whose device can "fail" (stream stops by itself)."""
+
+    opened: list["_FakeStream"] = []
+
+    def __init__(self, *, callback, finished_callback, **kwargs):
+        self.callback, self.finished_callback, self.kwargs = callback, finished_callback, kwargs
+        self.active = False
+        self.closed = False
+        _FakeStream.opened.append(self)
+
+    def start(self):
+        self.active = True
+
+    def stop(self):
+        self.active = False
+
+    def abort(self):
+        self.active = False
+
+    def close(self):
+        self.closed = True
+
+    def device_error(self):
+        """What PortAudio does when the device vanishes: the stream ends and says so."""
+        self.active = False
+        self.finished_callback()
+
+
+def test_watchdog_restarts_the_stream_after_a_device_error(small_bank, monkeypatch):
+    import time
+
+    _FakeStream.opened = []
+    sd = fake_sd(DEVICES, APIS, default_out=1)
+    sd.OutputStream = _FakeStream
+    monkeypatch.setattr(outputs, "import_sounddevice", lambda: sd)
+    out = SoundDeviceOutput(Engine(small_bank, channels=1), block_size=64)
+    out.start()
+    try:
+        first = _FakeStream.opened[0]
+        assert out.is_running()
+        first.device_error()
+        deadline = time.monotonic() + 5.0
+        while out.stats.restarts == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert out.stats.restarts == 1
+        assert first.closed and len(_FakeStream.opened) == 2
+        assert out.is_running() and _FakeStream.opened[1].active
+        # the new stream renders the same engine: its callback fills a block
+        buf = np.zeros((64, 1), dtype=np.float32)
+        _FakeStream.opened[1].callback(buf, 64, None, types.SimpleNamespace(output_underflow=False))
+        assert out.stats.callbacks == 1
+    finally:
+        out.stop()
+    assert not _FakeStream.opened[1].active
