@@ -93,16 +93,17 @@ def run(args: argparse.Namespace) -> int:
             raise ParameterError("--balance needs --intensity I (0..1)")
         if args.intensity == 0.0:
             raise ParameterError("--intensity 0 is silence; nothing to render")
+        analysis = None
         fs = args.rate or 48000.0
-        level = knob_to_level_db(args.intensity, ceiling_db=args.ceiling_db, range_db=args.range_db)
-        shaper = SpectralShaper(fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order)
-        weights = shaper.solve_balance(basis, args.balance, level_db=level)
     else:
         analysis = analyze_file(args.from_file, args, basis)
         fs = args.rate or analysis.fs
-        target = variant_spectra(analysis, basis)[args.variant]
-        shaper = SpectralShaper(fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order)
-        weights = shaper.solve_weights(target, level_db=analysis.level_db)
+    shaper = SpectralShaper(fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order)
+    if analysis is None:
+        level = knob_to_level_db(args.intensity, ceiling_db=args.ceiling_db, range_db=args.range_db)
+        weights = shaper.solve_balance(basis, args.balance, level_db=level)
+    else:
+        weights = shaper.solve_weights(variant_spectra(analysis, basis)[args.variant], level_db=analysis.level_db)
     signal = shaper.render(shaper.power_envelope(weights), shaper.random_phases(rng))
     _write(args, signal, fs)
     return 0

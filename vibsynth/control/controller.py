@@ -99,6 +99,9 @@ class KnobEvent:
 
 Listener = Callable[[KnobEvent], None]
 
+#: ChannelState field -> the name subscribers see (the same names as :meth:`Controller.get`).
+_EVENT_NAMES = {"muted": "mute", "glide_s": "glide"}
+
 
 def check_finite(name: str, value: float) -> float:
     """Reject NaN/inf and non-numbers; return the value as float."""
@@ -178,7 +181,7 @@ class Controller:
         with self._lock:
             for c in chans:
                 self._state[c] = replace(self._state[c], **{field: value})
-                events.append(KnobEvent(c, "mute" if field == "muted" else field if field != "glide_s" else "glide", value, source))
+                events.append(KnobEvent(c, _EVENT_NAMES.get(field, field), value, source))
             listeners = list(self._listeners)
         for listener in listeners:
             for event in events:
