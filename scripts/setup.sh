@@ -8,7 +8,8 @@ cd "$(dirname "$0")/.."
 extras=""
 [ "${1:-}" = "--test" ] && extras="[test]"
 
-apt_packages="libportaudio2 jackd2 liblo-tools python3-venv"
+# gcc + python3-dev build the compiled real-time core (vibsynth/engine/_core.c) at pip install.
+apt_packages="libportaudio2 jackd2 liblo-tools python3-venv python3-dev gcc"
 missing=""
 for p in $apt_packages; do
   dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"

@@ -15,6 +15,8 @@ __all__ = [
     "DeviceError",
     "CodecError",
     "MissingDependencyError",
+    "EngineBusyError",
+    "ScheduleFullError",
 ]
 
 
@@ -48,3 +50,11 @@ class CodecError(VibsynthError):
 
 class MissingDependencyError(VibsynthError, ImportError):
     """An optional dependency (scikit-learn, matplotlib: ``pip install 'vibsynth[research]'``) is missing."""
+
+
+class EngineBusyError(VibsynthError):
+    """The engine's command hand-off is full: the command was refused and nothing changed."""
+
+
+class ScheduleFullError(EngineBusyError):
+    """Too many timetagged commands are waiting: the cap (``engine.schedule_capacity``) was reached."""

@@ -89,21 +89,23 @@ def test_channel_map_validation(small_bank):
     assert out.device_channels == 3
 
 
-def test_callback_maps_channels_counts_underflows_and_survives_errors(small_bank):
+PA_OUTPUT_UNDERFLOW = 0x4
+
+
+def test_compiled_callback_maps_channels_and_counts_underflows(small_bank):
+    """The real C callback PortAudio calls: channel map, untouched columns zeroed, flags counted."""
     e = Engine(small_bank, channels=2, initial_intensity=0.5)
     out = SoundDeviceOutput(e, channel_map=[3, 1], block_size=64)
+    e.set_output_map(out.device_channels, out.channel_map)
     buf = np.full((64, 3), 7.0, dtype=np.float32)
-    status = types.SimpleNamespace(output_underflow=True)
-    out._callback(buf, 64, None, status)
+    assert e._core.run_callback(buf, PA_OUTPUT_UNDERFLOW) == 0  # paContinue
     ref = Engine(small_bank, channels=2, initial_intensity=0.5).render(64)
     np.testing.assert_array_equal(buf[:, 2], ref[:, 0])
     np.testing.assert_array_equal(buf[:, 0], ref[:, 1])
     assert not buf[:, 1].any()
-    assert out.stats.underflows == 1 and e.stats.underflows == 1
-    out.engine = None  # make render fail: the buffer must still be filled (with silence)
-    buf[:] = 7.0
-    out._callback(buf, 64, None, types.SimpleNamespace(output_underflow=False))
-    assert not buf.any() and out.stats.errors == 1
+    assert out.stats.underflows == 1 and e.stats.underflows == 1 and out.stats.callbacks == 1
+    e._core.run_callback(buf, 0)
+    assert out.stats.underflows == 1 and out.stats.callbacks == 2
 
 
 @pytest.fixture
@@ -157,8 +159,8 @@ class _FakeStream:
 
     opened: list["_FakeStream"] = []
 
-    def __init__(self, *, callback, finished_callback, **kwargs):
-        self.callback, self.finished_callback, self.kwargs = callback, finished_callback, kwargs
+    def __init__(self, kind="output", *, callback, finished_callback, userdata=None, **kwargs):
+        self.callback, self.userdata, self.finished_callback, self.kwargs = callback, userdata, finished_callback, kwargs
         self.active = False
         self.closed = False
         _FakeStream.opened.append(self)
@@ -186,7 +188,8 @@ def test_watchdog_restarts_the_stream_after_a_device_error(small_bank, monkeypat
 
     _FakeStream.opened = []
     sd = fake_sd(DEVICES, APIS, default_out=1)
-    sd.OutputStream = _FakeStream
+    sd._StreamBase = _FakeStream
+    sd._ffi = types.SimpleNamespace(cast=lambda ctype, value: value)
     monkeypatch.setattr(outputs, "import_sounddevice", lambda: sd)
     out = SoundDeviceOutput(Engine(small_bank, channels=1), block_size=64)
     out.start()
@@ -200,10 +203,8 @@ def test_watchdog_restarts_the_stream_after_a_device_error(small_bank, monkeypat
         assert out.stats.restarts == 1
         assert first.closed and len(_FakeStream.opened) == 2
         assert out.is_running() and _FakeStream.opened[1].active
-        # the new stream renders the same engine: its callback fills a block
-        buf = np.zeros((64, 1), dtype=np.float32)
-        _FakeStream.opened[1].callback(buf, 64, None, types.SimpleNamespace(output_underflow=False))
-        assert out.stats.callbacks == 1
+        # the new stream runs the same engine's compiled callback
+        assert (_FakeStream.opened[1].callback, _FakeStream.opened[1].userdata) == out.engine.callback_addresses()
     finally:
         out.stop()
     assert not _FakeStream.opened[1].active

@@ -5,11 +5,13 @@ A small interface (like mido's ports) so tests and the service swap them freely:
 ``start()`` / ``stop()`` / ``is_running()`` / ``describe()`` and a ``stats``
 (:class:`OutputStats`) object.
 
-* :class:`SoundDeviceOutput`: a PortAudio callback stream (python-sounddevice).
-  The callback renders straight into PortAudio's buffer (or through a
-  preallocated buffer when channels are remapped), allocates no arrays, takes no
-  lock, never logs and always fills the whole buffer (zeros if the engine
-  raised). Underflows are counted from the callback's status flags. A watchdog
+* :class:`SoundDeviceOutput`: a PortAudio callback stream (python-sounddevice). The
+  callback is the engine's compiled C callback (:meth:`Engine.callback_addresses`),
+  handed to PortAudio through sounddevice's ``_StreamBase(callback=<C pointer>,
+  userdata=...)`` hook (the one ``rtmixer`` uses): it renders straight into
+  PortAudio's interleaved buffer with the channel map, never calls into Python (no
+  GIL), allocates nothing, takes no lock, never logs and always fills the whole
+  buffer. Underflows are counted in C from the callback's status flags. A watchdog
   thread restarts the stream (with back-off) when the device errors or the stream
   stops by itself.
 * :class:`NullOutput`: paced by ``time.monotonic`` in its own thread, for machines
@@ -49,9 +51,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: GIL switch interval while a real-time stream runs (CPython default 5 ms).
-SWITCH_INTERVAL_S = 0.0005
-
 
 @dataclass
 class OutputStats:
@@ -73,6 +72,23 @@ class OutputStats:
     underflows: int = 0
     restarts: int = 0
     errors: int = 0
+
+
+class CallbackStats:
+    """:class:`OutputStats` of the compiled callback: its counters live in the engine's core."""
+
+    def __init__(self, engine: Engine) -> None:
+        self._engine = engine
+        self.restarts = 0
+        self.errors = 0
+
+    @property
+    def callbacks(self) -> int:
+        return self._engine.stats.callbacks
+
+    @property
+    def underflows(self) -> int:
+        return self._engine.stats.underflows
 
 
 class OutputBackend:
@@ -224,9 +240,7 @@ class SoundDeviceOutput(OutputBackend):
             )
         self.channel_map = [int(m) - 1 for m in mapping]
         self.device_channels = max(self.channel_map) + 1
-        self._identity = self.channel_map == list(range(engine.channels)) and self.device_channels == engine.channels
-        self._buffer = np.zeros((max(self.block_size, 8192), engine.channels), dtype=np.float32)
-        self._pairs = list(enumerate(self.channel_map))
+        self.stats = CallbackStats(engine)  # type: ignore[assignment]
         self.restart = restart
         self._sd: ModuleType | None = None
         self._stream: Any = None
@@ -236,30 +250,6 @@ class SoundDeviceOutput(OutputBackend):
         self._watchdog: threading.Thread | None = None
         self._stop_event = threading.Event()
         self.last_error: BaseException | None = None
-
-    # -- the real-time callback -------------------------------------------------
-    def _callback(self, outdata: np.ndarray, frames: int, time_info: Any, status: Any) -> None:
-        try:
-            if status.output_underflow:
-                self._count_underflow()
-            if self._identity:
-                self.engine.render_into(outdata)
-            else:
-                outdata.fill(0.0)
-                done = 0
-                cap = self._buffer.shape[0]
-                while done < frames:
-                    n = min(cap, frames - done)
-                    buf = self._buffer[:n]
-                    self.engine.render_into(buf)
-                    for src, dst in self._pairs:
-                        outdata[done:done + n, dst] = buf[:, src]
-                    done += n
-            self.stats.callbacks += 1
-        except Exception as exc:  # never let an exception kill the stream; report from the watchdog
-            outdata.fill(0.0)
-            self.stats.errors += 1
-            self.last_error = exc
 
     def _finished(self) -> None:
         if self._want_running:
@@ -280,23 +270,25 @@ class SoundDeviceOutput(OutputBackend):
                 f"the channel map needs {self.device_channels}"
             )
         try:
-            self._stream = sd.OutputStream(
-                samplerate=self.engine.fs, blocksize=self.block_size, device=index,
-                channels=self.device_channels, dtype="float32", latency=self.latency,
-                callback=self._callback, finished_callback=self._finished,
-            )
+            self._stream = self._open_stream(sd, index)
         except Exception as exc:  # sd.PortAudioError, ValueError for bad settings
             raise DeviceError(f"cannot open {info['name']!r} at {self.engine.fs:g} Hz: {exc}") from None
         self._device_index = index
         self._failed = False
 
+    def _open_stream(self, sd: ModuleType, index: int) -> Any:
+        """A PortAudio output stream whose callback is the engine's compiled one (no GIL)."""
+        callback, userdata = self.engine.callback_addresses()
+        self.engine.set_output_map(self.device_channels, self.channel_map)
+        return sd._StreamBase(
+            kind="output", samplerate=self.engine.fs, blocksize=self.block_size, device=index,
+            channels=self.device_channels, dtype="float32", latency=self.latency,
+            callback=sd._ffi.cast("PaStreamCallback *", callback), userdata=sd._ffi.cast("void *", userdata),
+            finished_callback=self._finished,
+        )
+
     def start(self) -> None:
         self.open()
-        # The callback needs the GIL every block period; a busy control thread would
-        # otherwise keep it for up to the 5 ms default switch interval (measured: that
-        # alone causes underflows at 128 frames / 48 kHz = 2.7 ms). 0.5 ms bounds the wait.
-        if sys.getswitchinterval() > SWITCH_INTERVAL_S:
-            sys.setswitchinterval(SWITCH_INTERVAL_S)
         self._want_running = True
         try:
             self._stream.start()

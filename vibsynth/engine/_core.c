@@ -1,0 +1,715 @@
+/*
+ * vibsynth real-time core: the per-block mix, the command hand-off, the scheduler and the
+ * PortAudio callback, in C so that the audio thread never needs Python's GIL.
+ *
+ * Threads
+ * -------
+ * - Producers (Python control threads holding the GIL, and C threads that do not, such as
+ *   the OSC fast path) call core_push(). They serialise among themselves on a producer lock
+ *   that the audio thread never takes.
+ * - The consumer (the PortAudio callback, or an offline render call with the GIL released)
+ *   calls core_render(). It allocates nothing, takes no lock, never logs, and does bounded
+ *   work per block: at most DRAIN_MAX commands leave the ring per block (the rest wait for
+ *   the next block), each costs O(channels + log heap), and the block is split at most once
+ *   per distinct due frame popped from the heap.
+ *
+ * Hand-off: a single-producer single-consumer ring of fixed-size commands (head and tail
+ * are published with release stores and read with acquire loads).
+ *
+ * Scheduler: commands with a future frame go into a binary heap keyed (frame, seq),
+ * preallocated to the schedule cap. Producers refuse a scheduled command when
+ * (scheduled submitted - scheduled done) reaches the cap, so the heap can never overflow
+ * and the refusal happens on the control side, where it can be answered.
+ *
+ * Arithmetic: every operation, and its order, is that of the numpy engine this replaced
+ * (double controls, float32 crossfade), so block-by-block output equals one-shot output
+ * exactly and the knob semantics are unchanged. Build with -ffp-contract=off.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <pythread.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#ifdef _WIN32
+#include <windows.h>
+#else
+#include <time.h>
+#endif
+
+#if defined(__GNUC__) || defined(__clang__)
+#define LOAD_ACQ(p) __atomic_load_n((p), __ATOMIC_ACQUIRE)
+#define STORE_REL(p, v) __atomic_store_n((p), (v), __ATOMIC_RELEASE)
+#define LOAD_RLX(p) __atomic_load_n((p), __ATOMIC_RELAXED)
+#define STORE_RLX(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
+#define FETCH_ADD(p, v) __atomic_fetch_add((p), (v), __ATOMIC_ACQ_REL)
+#else /* MSVC on x86/x64: aligned 64-bit accesses are atomic; barriers stop compiler reordering */
+#include <intrin.h>
+#define LOAD_ACQ(p) (_ReadWriteBarrier(), *(volatile int64_t *)(p))
+#define STORE_REL(p, v) do { _ReadWriteBarrier(); *(volatile int64_t *)(p) = (v); } while (0)
+#define LOAD_RLX(p) (*(volatile int64_t *)(p))
+#define STORE_RLX(p, v) (*(volatile int64_t *)(p) = (v))
+#define FETCH_ADD(p, v) _InterlockedExchangeAdd64((volatile __int64 *)(p), (v))
+#endif
+
+#define MAXCH 64
+#define DRAIN_MAX 1024
+#define KNOB_FADE_IN 0.01
+#define PA_OUTPUT_UNDERFLOW 0x00000004UL
+
+enum { CMD_KNOB = 1, CMD_GLIDE = 2, CMD_MUTE = 3, CMD_PANIC = 4 };
+enum { R_INTENSITY = 0, R_BALANCE = 1, R_MUTE = 2 };
+enum { PUSH_OK = 0, PUSH_RING_FULL = 1, PUSH_SCHEDULE_FULL = 2 };
+
+typedef struct {
+    int32_t kind;
+    int32_t arg;      /* knob index for CMD_KNOB, muted flag for CMD_MUTE */
+    double value;     /* knob value, or glide seconds for CMD_GLIDE */
+    double glide;     /* per-move glide (s); NaN = the channel's glide */
+    uint64_t mask;    /* channels, bit c = channel c */
+    int64_t at;       /* stream frame, -1 = as soon as possible */
+    int64_t seq;
+} cmd_t;
+
+typedef struct {
+    double start[MAXCH], delta[MAXCH], pos[MAXCH], len[MAXCH];
+    int64_t end_frame;
+} ramps_t;
+
+typedef struct {
+    PyObject_HEAD
+    /* bank */
+    Py_buffer sig;
+    Py_buffer peaks_buf;
+    const float *flat;
+    const double *peaks;
+    double dpeaks[4096];
+    int64_t n;
+    int levels;
+    /* mappings */
+    int channels;
+    double fs, gain_a, gain_b, pos_scale, pos_offset, pos_max, limiter, mute_fade_s, bal_lo, bal_hi;
+    double idx_max;
+    float ceil32, floor32;
+    int64_t max_block;
+    /* real-time state (audio thread) */
+    ramps_t ramps[3];
+    double glide_s[MAXCH];
+    int32_t muted[MAXCH];
+    int64_t read_idx[MAXCH];
+    int64_t frame;
+    /* ring */
+    cmd_t *ring;
+    int64_t ring_cap;
+    int64_t head;   /* consumer-owned, published */
+    int64_t tail;   /* producer-owned, published */
+    /* scheduler */
+    cmd_t *heap;
+    int64_t heap_len, sched_cap;
+    int64_t sched_submitted;  /* producer side */
+    int64_t sched_done;       /* consumer side: fired, applied late, or dropped by panic */
+    /* counters */
+    int64_t next_seq, applied_seq, blocks, underflows, late, ring_full, schedule_full, callbacks;
+    double load_last, load_peak, load_avg;
+    /* device output mapping (PortAudio callback) */
+    int dev_channels;
+    int identity;
+    int colmap[MAXCH];
+    PyThread_type_lock plock;
+} Core;
+
+/* ------------------------------------------------------------------ time */
+static double now_s(void) {
+#ifdef _WIN32
+    LARGE_INTEGER f, t;
+    QueryPerformanceFrequency(&f);
+    QueryPerformanceCounter(&t);
+    return (double)t.QuadPart / (double)f.QuadPart;
+#else
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+}
+
+/* ------------------------------------------------------------------ ramps */
+static inline double ramp_value(const ramps_t *r, int c) {
+    double length = r->len[c];
+    return r->start[c] + r->delta[c] * (fmin(r->pos[c], length) / length);
+}
+
+/* Value after `step` more samples (the numpy engine's fill: ((pos+step) min len)/len*delta+start). */
+static inline double ramp_at(const ramps_t *r, int c, double step) {
+    double x = r->pos[c] + step;
+    x = fmin(x, r->len[c]);
+    x = x / r->len[c];
+    x = x * r->delta[c];
+    return x + r->start[c];
+}
+
+static void ramp_move(ramps_t *r, int c, double target, int64_t samples, int64_t frame) {
+    double current = ramp_value(r, c);
+    r->start[c] = current;
+    r->delta[c] = target - current;
+    if (samples <= 0) {
+        r->pos[c] = 1.0;
+        r->len[c] = 1.0;
+    } else {
+        r->pos[c] = 0.0;
+        r->len[c] = (double)samples;
+        if (frame + samples > r->end_frame) r->end_frame = frame + samples;
+    }
+}
+
+/* ------------------------------------------------------------------ heap keyed (at, seq) */
+static inline int cmd_less(const cmd_t *a, const cmd_t *b) {
+    return a->at < b->at || (a->at == b->at && a->seq < b->seq);
+}
+
+static void heap_push(Core *c, const cmd_t *cmd) {
+    int64_t i = c->heap_len++;
+    cmd_t *h = c->heap;
+    while (i > 0) {
+        int64_t p = (i - 1) / 2;
+        if (!cmd_less(cmd, &h[p])) break;
+        h[i] = h[p];
+        i = p;
+    }
+    h[i] = *cmd;
+}
+
+static void heap_pop(Core *c, cmd_t *out) {
+    cmd_t *h = c->heap;
+    *out = h[0];
+    int64_t n = --c->heap_len;
+    if (n == 0) return;
+    cmd_t last = h[n];
+    int64_t i = 0;
+    for (;;) {
+        int64_t l = 2 * i + 1, r = l + 1, m = i;
+        const cmd_t *best = &last;
+        if (l < n && cmd_less(&h[l], best)) { m = l; best = &h[l]; }
+        if (r < n && cmd_less(&h[r], best)) { m = r; }
+        if (m == i) break;
+        h[i] = h[m];
+        i = m;
+    }
+    h[i] = last;
+}
+
+/* ------------------------------------------------------------------ commands (audio thread) */
+static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
+    double fs = c->fs;
+    switch (cmd->kind) {
+    case CMD_KNOB: {
+        ramps_t *r = &c->ramps[cmd->arg == 0 ? R_INTENSITY : R_BALANCE];
+        double value = cmd->value;
+        if (cmd->arg == 1) value = fmin(fmax(value, c->bal_lo), c->bal_hi);
+        for (int ch = 0; ch < c->channels; ch++) {
+            if (!(cmd->mask >> ch & 1)) continue;
+            double glide = isnan(cmd->glide) ? c->glide_s[ch] : cmd->glide;
+            ramp_move(r, ch, value, (int64_t)nearbyint(glide * fs), frame);
+        }
+        break;
+    }
+    case CMD_GLIDE:
+        for (int ch = 0; ch < c->channels; ch++)
+            if (cmd->mask >> ch & 1) c->glide_s[ch] = cmd->value;
+        break;
+    case CMD_MUTE: {
+        ramps_t *r = &c->ramps[R_MUTE];
+        double target = cmd->arg ? 0.0 : 1.0;
+        for (int ch = 0; ch < c->channels; ch++) {
+            if (!(cmd->mask >> ch & 1)) continue;
+            c->muted[ch] = cmd->arg ? 1 : 0;
+            double distance = fabs(target - ramp_value(r, ch));
+            ramp_move(r, ch, target, (int64_t)nearbyint(c->mute_fade_s * fs * distance), frame);
+        }
+        break;
+    }
+    case CMD_PANIC:
+        STORE_REL(&c->sched_done, c->sched_done + c->heap_len);
+        c->heap_len = 0;
+        for (int ch = 0; ch < c->channels; ch++)
+            ramp_move(&c->ramps[R_INTENSITY], ch, 0.0, (int64_t)nearbyint(c->mute_fade_s * fs), frame);
+        break;
+    default:
+        break;
+    }
+}
+
+static void drain(Core *c, int64_t block_start) {
+    int64_t head = c->head;
+    int64_t tail = LOAD_ACQ(&c->tail);
+    int64_t mask = c->ring_cap - 1;
+    int taken = 0;
+    int64_t done = 0;
+    while (head != tail && taken < DRAIN_MAX) {
+        const cmd_t *cmd = &c->ring[head & mask];
+        int64_t at = cmd->at;
+        if (at < 0 || at <= block_start) {
+            if (at >= 0) {
+                if (at < block_start) c->late++;
+                done++;
+            }
+            apply(c, cmd, block_start);
+        } else if (c->heap_len < c->sched_cap) {
+            heap_push(c, cmd);
+        } else {
+            done++;  /* unreachable while producers honour the cap */
+        }
+        if (cmd->seq > c->applied_seq) STORE_REL(&c->applied_seq, cmd->seq);
+        head++;
+        taken++;
+    }
+    if (done) STORE_REL(&c->sched_done, c->sched_done + done);
+    STORE_REL(&c->head, head);
+}
+
+/* ------------------------------------------------------------------ rendering */
+static inline void controls(const Core *c, int ch, double step, float *G, float *F, int64_t *I) {
+    double k = ramp_at(&c->ramps[R_INTENSITY], ch, step);
+    double b = ramp_at(&c->ramps[R_BALANCE], ch, step);
+    double m = ramp_at(&c->ramps[R_MUTE], ch, step);
+    double g = k * c->gain_a;
+    g = g + c->gain_b;
+    g = exp(g);
+    double t = k * (1.0 / KNOB_FADE_IN);
+    t = fmin(t, 1.0);
+    g = g * t;
+    t = b * c->pos_scale;
+    t = t + c->pos_offset;
+    t = fmin(fmax(t, 0.0), c->pos_max);
+    double f = floor(t);
+    f = fmin(f, c->idx_max);
+    int64_t i = (int64_t)f;
+    f = t - f;
+    double lim = c->dpeaks[i] * f;
+    lim = lim + c->peaks[i];
+    lim = c->limiter / lim;
+    g = fmin(g, lim);
+    g = g * m;
+    *G = (float)g;
+    *F = (float)f;
+    *I = i;
+}
+
+/* Frames s0..s1 of `out` (row stride `stride` floats; engine channel ch -> column colmap[ch]). */
+static void segment(Core *c, float *out, int64_t stride, const int *colmap, int64_t s0, int64_t s1, int64_t frame) {
+    int64_t m = s1 - s0;
+    int64_t end = c->ramps[0].end_frame;
+    if (c->ramps[1].end_frame > end) end = c->ramps[1].end_frame;
+    if (c->ramps[2].end_frame > end) end = c->ramps[2].end_frame;
+    int ramping = frame < end;
+    const float *flat = c->flat;
+    int64_t n = c->n;
+    float hi_clip = c->ceil32, lo_clip = c->floor32;
+    for (int ch = 0; ch < c->channels; ch++) {
+        float G, F;
+        int64_t I;
+        controls(c, ch, 1.0, &G, &F, &I);
+        int64_t r = c->read_idx[ch];
+        float *dst = out + s0 * stride + colmap[ch];
+        for (int64_t j = 0; j < m; j++) {
+            if (ramping && j) controls(c, ch, (double)(j + 1), &G, &F, &I);
+            const float *row = flat + I * n;
+            float lo = row[r], hi = row[r + n];
+            hi = hi - lo;
+            hi = hi * F;
+            hi = lo + hi;
+            hi = hi * G;
+            hi = hi < hi_clip ? hi : hi_clip;
+            hi = hi > lo_clip ? hi : lo_clip;
+            dst[j * stride] = hi;
+            if (++r == n) r = 0;
+        }
+        c->read_idx[ch] = r;
+    }
+    if (ramping) {
+        for (int k = 0; k < 3; k++) {
+            ramps_t *rp = &c->ramps[k];
+            for (int ch = 0; ch < c->channels; ch++) rp->pos[ch] = fmin(rp->pos[ch] + (double)m, rp->len[ch]);
+        }
+    }
+}
+
+static void render_block(Core *c, float *out, int64_t stride, const int *colmap, int64_t frames) {
+    int64_t start = c->frame;
+    drain(c, start);
+    int64_t end = start + frames, s = 0, fired = 0;
+    while (c->heap_len && c->heap[0].at < end) {
+        int64_t at = c->heap[0].at;
+        int64_t split = at - start;
+        if (split > s) {
+            segment(c, out, stride, colmap, s, split, start + s);
+            s = split;
+        }
+        while (c->heap_len && c->heap[0].at == at) {
+            cmd_t cmd;
+            heap_pop(c, &cmd);
+            apply(c, &cmd, at);
+            fired++;
+        }
+    }
+    if (fired) STORE_REL(&c->sched_done, c->sched_done + fired);
+    if (s < frames) segment(c, out, stride, colmap, s, frames, start + s);
+    STORE_REL(&c->frame, end);
+}
+
+static void core_render(Core *c, float *out, int64_t frames, int64_t stride, const int *colmap) {
+    double t0 = now_s();
+    int64_t done = 0;
+    while (done < frames) {
+        int64_t step = frames - done < c->max_block ? frames - done : c->max_block;
+        render_block(c, out + done * stride, stride, colmap, step);
+        done += step;
+    }
+    STORE_REL(&c->blocks, c->blocks + 1);
+    if (frames) {
+        double load = (now_s() - t0) * c->fs / (double)frames;
+        c->load_last = load;
+        if (load > c->load_peak) c->load_peak = load;
+        c->load_avg += 0.01 * (load - c->load_avg);
+    }
+}
+
+/* The PortAudio stream callback (PaStreamCallback), interleaved float32 output. */
+static int pa_callback(const void *input, void *output, unsigned long frames, const void *time_info,
+                       unsigned long status, void *user) {
+    Core *c = (Core *)user;
+    (void)input;
+    (void)time_info;
+    if (status & PA_OUTPUT_UNDERFLOW) STORE_REL(&c->underflows, c->underflows + 1);
+    float *out = (float *)output;
+    if (!c->identity) memset(out, 0, sizeof(float) * (size_t)frames * (size_t)c->dev_channels);
+    core_render(c, out, (int64_t)frames, c->dev_channels, c->colmap);
+    STORE_REL(&c->callbacks, c->callbacks + 1);
+    return 0; /* paContinue */
+}
+
+/* ------------------------------------------------------------------ producer side */
+/* Any thread; the GIL is not needed. Returns PUSH_*; *seq_out gets the sequence number. */
+static int core_push(Core *c, cmd_t *cmd, int64_t *seq_out) {
+    int rc = PUSH_OK;
+    PyThread_acquire_lock(c->plock, WAIT_LOCK);
+    int64_t tail = c->tail;
+    if (tail - LOAD_ACQ(&c->head) >= c->ring_cap) {
+        c->ring_full++;
+        rc = PUSH_RING_FULL;
+    } else if (cmd->at >= 0 && c->sched_submitted - LOAD_ACQ(&c->sched_done) >= c->sched_cap) {
+        c->schedule_full++;
+        rc = PUSH_SCHEDULE_FULL;
+    } else {
+        if (cmd->at >= 0) c->sched_submitted++;
+        cmd->seq = ++c->next_seq;
+        c->ring[tail & (c->ring_cap - 1)] = *cmd;
+        STORE_REL(&c->tail, tail + 1);
+        if (seq_out) *seq_out = cmd->seq;
+    }
+    PyThread_release_lock(c->plock);
+    return rc;
+}
+
+/* ------------------------------------------------------------------ Python type */
+static void Core_dealloc(Core *self) {
+    if (self->sig.obj) PyBuffer_Release(&self->sig);
+    if (self->peaks_buf.obj) PyBuffer_Release(&self->peaks_buf);
+    PyMem_RawFree(self->ring);
+    PyMem_RawFree(self->heap);
+    if (self->plock) PyThread_free_lock(self->plock);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int Core_init(Core *self, PyObject *args, PyObject *kw) {
+    static char *names[] = {"signals", "peaks", "balances_lo", "balances_hi", "offsets", "fs", "ceiling_db",
+                            "range_db", "glide_s", "mute_fade_s", "limiter_ceiling", "initial_intensity",
+                            "initial_balance", "max_block", "ring_capacity", "schedule_capacity", NULL};
+    PyObject *sig_obj, *peaks_obj, *offsets;
+    double lo, hi, fs, ceiling_db, range_db, glide_s, mute_fade_s, limiter, init_k, init_b;
+    Py_ssize_t max_block, ring_cap, sched_cap;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OOddOddddddddnnn", names, &sig_obj, &peaks_obj, &lo, &hi, &offsets,
+                                     &fs, &ceiling_db, &range_db, &glide_s, &mute_fade_s, &limiter, &init_k, &init_b,
+                                     &max_block, &ring_cap, &sched_cap))
+        return -1;
+    if (PyObject_GetBuffer(sig_obj, &self->sig, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_ND) < 0) return -1;
+    if (self->sig.ndim != 2 || strcmp(self->sig.format, "f") != 0) {
+        PyErr_SetString(PyExc_ValueError, "signals must be a C-contiguous float32 array (levels, n)");
+        return -1;
+    }
+    if (PyObject_GetBuffer(peaks_obj, &self->peaks_buf, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) return -1;
+    self->levels = (int)self->sig.shape[0];
+    self->n = self->sig.shape[1];
+    if (strcmp(self->peaks_buf.format, "d") != 0 || self->peaks_buf.len != (Py_ssize_t)(sizeof(double) * self->levels)) {
+        PyErr_SetString(PyExc_ValueError, "peaks must be float64 of shape (levels,)");
+        return -1;
+    }
+    if (self->levels < 2 || self->levels > 4096) {
+        PyErr_SetString(PyExc_ValueError, "levels must be in 2..4096");
+        return -1;
+    }
+    Py_ssize_t nch = PySequence_Length(offsets);
+    if (nch < 1 || nch > MAXCH) {
+        PyErr_Format(PyExc_ValueError, "channels must be in 1..%d", MAXCH);
+        return -1;
+    }
+    if (ring_cap < 2 || (ring_cap & (ring_cap - 1)) || sched_cap < 1 || max_block < 1 || max_block >= self->n) {
+        PyErr_SetString(PyExc_ValueError, "bad ring/schedule capacity or max_block");
+        return -1;
+    }
+    self->flat = (const float *)self->sig.buf;
+    self->peaks = (const double *)self->peaks_buf.buf;
+    for (int i = 0; i < self->levels - 1; i++) self->dpeaks[i] = self->peaks[i + 1] - self->peaks[i];
+    self->dpeaks[self->levels - 1] = 0.0;
+    self->channels = (int)nch;
+    self->fs = fs;
+    double ln10_20 = log(10.0) / 20.0;
+    self->gain_a = range_db * ln10_20;
+    self->gain_b = (ceiling_db - range_db) * ln10_20;
+    self->pos_scale = (double)(self->levels - 1) / (hi - lo);
+    self->pos_offset = -lo * self->pos_scale;
+    self->pos_max = (double)(self->levels - 1);
+    self->idx_max = (double)(self->levels - 2);
+    self->bal_lo = lo;
+    self->bal_hi = hi;
+    self->limiter = limiter;
+    self->ceil32 = (float)limiter;
+    self->floor32 = -(float)limiter;
+    self->mute_fade_s = mute_fade_s;
+    self->max_block = max_block;
+    double b0 = fmin(fmax(init_b, lo), hi);
+    for (int ch = 0; ch < self->channels; ch++) {
+        double init[3] = {init_k, b0, 1.0};
+        for (int k = 0; k < 3; k++) {
+            self->ramps[k].start[ch] = init[k];
+            self->ramps[k].delta[ch] = 0.0;
+            self->ramps[k].pos[ch] = 1.0;
+            self->ramps[k].len[ch] = 1.0;
+        }
+        self->glide_s[ch] = glide_s;
+        PyObject *o = PySequence_GetItem(offsets, ch);
+        if (!o) return -1;
+        long long off = PyLong_AsLongLong(o);
+        Py_DECREF(o);
+        if (off == -1 && PyErr_Occurred()) return -1;
+        self->read_idx[ch] = ((off % self->n) + self->n) % self->n;
+        self->colmap[ch] = ch;
+    }
+    self->dev_channels = self->channels;
+    self->identity = 1;
+    self->ring_cap = ring_cap;
+    self->sched_cap = sched_cap;
+    self->ring = PyMem_RawCalloc((size_t)ring_cap, sizeof(cmd_t));
+    self->heap = PyMem_RawCalloc((size_t)sched_cap, sizeof(cmd_t));
+    self->plock = PyThread_allocate_lock();
+    if (!self->ring || !self->heap || !self->plock) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *Core_push(Core *self, PyObject *args) {
+    cmd_t cmd;
+    unsigned long long mask;
+    long long at;
+    if (!PyArg_ParseTuple(args, "iiddKL", &cmd.kind, &cmd.arg, &cmd.value, &cmd.glide, &mask, &at)) return NULL;
+    cmd.mask = mask;
+    cmd.at = at;
+    int64_t seq = 0;
+    int rc = core_push(self, &cmd, &seq);
+    if (rc != PUSH_OK) return PyLong_FromLong(-rc);
+    return PyLong_FromLongLong(seq);
+}
+
+static PyObject *Core_render_into(Core *self, PyObject *arg) {
+    Py_buffer view;
+    if (PyObject_GetBuffer(arg, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE | PyBUF_ND) < 0) return NULL;
+    if (view.ndim != 2 || strcmp(view.format, "f") != 0 || view.shape[1] != self->channels) {
+        PyBuffer_Release(&view);
+        PyErr_SetString(PyExc_ValueError, "out must be a writable C-contiguous float32 array (frames, channels)");
+        return NULL;
+    }
+    static const int identity[MAXCH] = {0,  1,  2,  3,  4,  5,  6,  7,  8,  9,  10, 11, 12, 13, 14, 15,
+                                        16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31,
+                                        32, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47,
+                                        48, 49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63};
+    float *out = (float *)view.buf;
+    int64_t frames = view.shape[0];
+    Py_BEGIN_ALLOW_THREADS
+    core_render(self, out, frames, self->channels, identity);
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&view);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Core_set_output_map(Core *self, PyObject *args) {
+    int dev_channels;
+    PyObject *cols;
+    if (!PyArg_ParseTuple(args, "iO", &dev_channels, &cols)) return NULL;
+    if (PySequence_Length(cols) != self->channels || dev_channels < 1) {
+        PyErr_SetString(PyExc_ValueError, "need one device column per engine channel");
+        return NULL;
+    }
+    int identity = dev_channels == self->channels;
+    int tmp[MAXCH];
+    for (int ch = 0; ch < self->channels; ch++) {
+        PyObject *o = PySequence_GetItem(cols, ch);
+        if (!o) return NULL;
+        long v = PyLong_AsLong(o);
+        Py_DECREF(o);
+        if (v == -1 && PyErr_Occurred()) return NULL;
+        if (v < 0 || v >= dev_channels) {
+            PyErr_SetString(PyExc_ValueError, "device column out of range");
+            return NULL;
+        }
+        tmp[ch] = (int)v;
+        if (v != ch) identity = 0;
+    }
+    memcpy(self->colmap, tmp, sizeof(tmp));
+    self->dev_channels = dev_channels;
+    self->identity = identity;
+    Py_RETURN_NONE;
+}
+
+static PyObject *Core_knob_values(Core *self, PyObject *unused) {
+    PyObject *list = PyList_New(self->channels);
+    if (!list) return NULL;
+    for (int ch = 0; ch < self->channels; ch++) {
+        PyObject *t = Py_BuildValue("(ddO)", ramp_value(&self->ramps[R_INTENSITY], ch),
+                                    ramp_value(&self->ramps[R_BALANCE], ch), self->muted[ch] ? Py_True : Py_False);
+        if (!t) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, ch, t);
+    }
+    return list;
+}
+
+static PyObject *Core_take_peak(Core *self, PyObject *unused) {
+    double peak = self->load_peak;
+    self->load_peak = 0.0;
+    return PyFloat_FromDouble(peak);
+}
+
+static PyObject *Core_add_underflows(Core *self, PyObject *arg) {
+    long long n = PyLong_AsLongLong(arg);
+    if (n == -1 && PyErr_Occurred()) return NULL;
+    FETCH_ADD(&self->underflows, (int64_t)n);
+    Py_RETURN_NONE;
+}
+
+/* Run the PortAudio callback on a Python buffer (float32 (frames, device_channels)): tests. */
+static PyObject *Core_run_callback(Core *self, PyObject *args) {
+    PyObject *arg;
+    unsigned long status;
+    if (!PyArg_ParseTuple(args, "Ok", &arg, &status)) return NULL;
+    Py_buffer view;
+    if (PyObject_GetBuffer(arg, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE | PyBUF_ND) < 0) return NULL;
+    if (view.ndim != 2 || strcmp(view.format, "f") != 0 || view.shape[1] != self->dev_channels) {
+        PyBuffer_Release(&view);
+        PyErr_SetString(PyExc_ValueError, "out must be float32 (frames, device_channels)");
+        return NULL;
+    }
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = pa_callback(NULL, view.buf, (unsigned long)view.shape[0], NULL, status, self);
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&view);
+    return PyLong_FromLong(rc);
+}
+
+static PyObject *Core_addresses(Core *self, PyObject *unused) {
+    return Py_BuildValue("(KK)", (unsigned long long)(uintptr_t)&pa_callback, (unsigned long long)(uintptr_t)self);
+}
+
+#define INT_GETTER(name, field)                                                                     \
+    static PyObject *Core_get_##name(Core *self, void *closure) {                                  \
+        return PyLong_FromLongLong(LOAD_ACQ(&self->field));                                        \
+    }
+INT_GETTER(frame, frame)
+INT_GETTER(applied_seq, applied_seq)
+INT_GETTER(blocks, blocks)
+INT_GETTER(underflows, underflows)
+INT_GETTER(late_commands, late)
+INT_GETTER(ring_full, ring_full)
+INT_GETTER(schedule_full, schedule_full)
+INT_GETTER(callbacks, callbacks)
+
+static PyObject *Core_get_pending(Core *self, void *closure) {
+    PyThread_acquire_lock(self->plock, WAIT_LOCK);
+    int64_t pending = self->sched_submitted - LOAD_ACQ(&self->sched_done);
+    PyThread_release_lock(self->plock);
+    return PyLong_FromLongLong(pending);
+}
+static PyObject *Core_get_load_last(Core *self, void *c) { return PyFloat_FromDouble(self->load_last); }
+static PyObject *Core_get_load_peak(Core *self, void *c) { return PyFloat_FromDouble(self->load_peak); }
+static PyObject *Core_get_load_avg(Core *self, void *c) { return PyFloat_FromDouble(self->load_avg); }
+static PyObject *Core_get_schedule_capacity(Core *self, void *c) { return PyLong_FromLongLong(self->sched_cap); }
+
+static PyGetSetDef Core_getset[] = {
+    {"frame", (getter)Core_get_frame, NULL, "frames rendered since start", NULL},
+    {"applied_seq", (getter)Core_get_applied_seq, NULL, "highest sequence number taken by the audio thread", NULL},
+    {"blocks", (getter)Core_get_blocks, NULL, "render calls", NULL},
+    {"underflows", (getter)Core_get_underflows, NULL, "output underflows reported by the driver", NULL},
+    {"late_commands", (getter)Core_get_late_commands, NULL, "scheduled commands that arrived late", NULL},
+    {"ring_full", (getter)Core_get_ring_full, NULL, "commands refused: hand-off ring full", NULL},
+    {"schedule_full", (getter)Core_get_schedule_full, NULL, "commands refused: schedule cap reached", NULL},
+    {"callbacks", (getter)Core_get_callbacks, NULL, "PortAudio callbacks run", NULL},
+    {"pending", (getter)Core_get_pending, NULL, "scheduled commands not yet applied", NULL},
+    {"schedule_capacity", (getter)Core_get_schedule_capacity, NULL, "schedule cap", NULL},
+    {"load_last", (getter)Core_get_load_last, NULL, "last render time / block period", NULL},
+    {"load_peak", (getter)Core_get_load_peak, NULL, "peak load since take_peak()", NULL},
+    {"load_avg", (getter)Core_get_load_avg, NULL, "exponential average load", NULL},
+    {NULL}};
+
+static PyMethodDef Core_methods[] = {
+    {"push", (PyCFunction)Core_push, METH_VARARGS,
+     "push(kind, arg, value, glide, mask, at) -> seq > 0, or -1 (ring full) / -2 (schedule full)"},
+    {"render_into", (PyCFunction)Core_render_into, METH_O, "render_into(out float32 (frames, channels)); GIL released"},
+    {"set_output_map", (PyCFunction)Core_set_output_map, METH_VARARGS,
+     "set_output_map(device_channels, columns): where each engine channel goes in the callback's buffer"},
+    {"knob_values", (PyCFunction)Core_knob_values, METH_NOARGS, "[(intensity, balance, muted)] per channel"},
+    {"take_peak", (PyCFunction)Core_take_peak, METH_NOARGS, "peak load since the last call (and reset it)"},
+    {"add_underflows", (PyCFunction)Core_add_underflows, METH_O, "count underflows seen by another output"},
+    {"run_callback", (PyCFunction)Core_run_callback, METH_VARARGS,
+     "run_callback(out float32 (frames, device_channels), status_flags) -> paContinue; for tests"},
+    {"addresses", (PyCFunction)Core_addresses, METH_NOARGS, "(PaStreamCallback address, userdata address)"},
+    {NULL}};
+
+static PyTypeObject CoreType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "vibsynth.engine._core.Core",
+    .tp_basicsize = sizeof(Core),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Real-time engine state, command ring, scheduler and PortAudio callback.",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Core_init,
+    .tp_dealloc = (destructor)Core_dealloc,
+    .tp_methods = Core_methods,
+    .tp_getset = Core_getset,
+};
+
+/* C producers (the OSC fast path) reach core_push through this capsule. */
+typedef struct {
+    int (*push)(Core *, cmd_t *, int64_t *);
+} core_api_t;
+static core_api_t core_api = {core_push};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_core", "vibsynth real-time core", -1, NULL};
+
+PyMODINIT_FUNC PyInit__core(void) {
+    if (PyType_Ready(&CoreType) < 0) return NULL;
+    PyObject *m = PyModule_Create(&module);
+    if (!m) return NULL;
+    Py_INCREF(&CoreType);
+    if (PyModule_AddObject(m, "Core", (PyObject *)&CoreType) < 0) return NULL;
+    PyModule_AddIntConstant(m, "CMD_KNOB", CMD_KNOB);
+    PyModule_AddIntConstant(m, "CMD_GLIDE", CMD_GLIDE);
+    PyModule_AddIntConstant(m, "CMD_MUTE", CMD_MUTE);
+    PyModule_AddIntConstant(m, "CMD_PANIC", CMD_PANIC);
+    PyModule_AddIntConstant(m, "MAX_CHANNELS", MAXCH);
+    PyModule_AddIntConstant(m, "DRAIN_MAX", DRAIN_MAX);
+    PyModule_AddObject(m, "_C_API", PyCapsule_New(&core_api, "vibsynth.engine._core._C_API", NULL));
+    return m;
+}
