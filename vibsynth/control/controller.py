@@ -9,10 +9,14 @@ OSC, MIDI, preset hot reload and the command line all go through a
   rejected with a message naming the range; nothing changes.
 * channel numbers are 0-based here (adapters translate from their own convention).
 
-The controller keeps the *target* state (the last value requested per channel,
-including scheduled ones) for queries and pushes every change to subscribers
-(e.g. OSC ``/notify`` clients). Its lock guards only this small state and is never
-taken by the audio thread.
+The controller keeps the *target* state for queries and pushes every change to
+subscribers (e.g. OSC ``/notify`` clients): per channel and setting, the value the engine
+will hold once every command submitted so far has taken effect. Each value remembers the
+stream frame it takes effect at (now for immediate commands), and a command only replaces
+a value that takes effect no later than it does, so timetagged bundles that arrive out of
+time order still leave the latest-timed value as the target. Its lock guards only this
+small state (and keeps submission order equal to state order); the audio thread never
+takes it.
 """
 from __future__ import annotations
 
@@ -148,6 +152,8 @@ class Controller:
         self.preset_resolver = preset_resolver
         self._lock = threading.Lock()
         self._state = [ChannelState(glide_s=initial_glide_s) for _ in range(engine.channels)]
+        # Stream frame at which each (channel, field) value takes effect.
+        self._effective: list[dict[str, int]] = [{} for _ in range(engine.channels)]
         self._listeners: list[Listener] = []
         self._last_seq = 0
         self.started_at = time.monotonic()
@@ -172,11 +178,32 @@ class Controller:
     def _engine_channels(self, chans: tuple[int, ...]) -> tuple[int, ...] | None:
         return None if len(chans) == self.channels else chans
 
-    def _submit(self, command: Command) -> None:
-        seq = self.engine.submit(command)
-        self._last_seq = max(self._last_seq, seq)
+    def _apply(self, command: Command, chans: tuple[int, ...], field: str, value: object, source: str) -> None:
+        """Submit ``command`` and record ``field = value`` on ``chans`` where it is the latest-timed value.
+
+        Both happen under the lock, so two threads setting the same knob leave the state
+        equal to what the engine received last.
+        """
+        events = []
+        with self._lock:
+            seq = self.engine.submit(command)
+            self._last_seq = max(self._last_seq, seq)
+            at = command.at_frame
+            frame = self.engine.frame_position if at is None else int(at)
+            for c in chans:
+                effective = self._effective[c]
+                if frame < effective.get(field, -1):
+                    continue  # a value timed later is already waiting: it stays the target
+                effective[field] = frame
+                self._state[c] = replace(self._state[c], **{field: value})
+                events.append(KnobEvent(c, _EVENT_NAMES.get(field, field), value, source))
+            listeners = list(self._listeners) if events else []
+        for listener in listeners:
+            for event in events:
+                listener(event)
 
     def _update(self, chans: tuple[int, ...], field: str, value: object, source: str) -> None:
+        """Record a state change that is not an engine command (e.g. the preset name)."""
         events = []
         with self._lock:
             for c in chans:
@@ -222,8 +249,8 @@ class Controller:
         if glide_s is not None:
             glide_s = check_range("glide", glide_s, 0.0, self.limits.glide_max_s)
         chans = self._channel_list(channels)
-        self._submit(SetKnob(name, number, self._engine_channels(chans), at_frame, glide_s))  # type: ignore[arg-type]
-        self._update(chans, name, number, source)
+        command = SetKnob(name, number, self._engine_channels(chans), at_frame, glide_s)  # type: ignore[arg-type]
+        self._apply(command, chans, name, number, source)
         return number
 
     def set_texture(
@@ -247,8 +274,7 @@ class Controller:
         """Set the glide time in seconds (0 = jump)."""
         number = check_range("glide", seconds, 0.0, self.limits.glide_max_s)
         chans = self._channel_list(channels)
-        self._submit(SetGlide(number, self._engine_channels(chans), at_frame))
-        self._update(chans, "glide_s", number, source)
+        self._apply(SetGlide(number, self._engine_channels(chans), at_frame), chans, "glide_s", number, source)
         return number
 
     def set_mute(
@@ -256,13 +282,14 @@ class Controller:
     ) -> None:
         """Mute (short fade out) or unmute channels; knob targets are kept."""
         chans = self._channel_list(channels)
-        self._submit(SetMute(bool(muted), self._engine_channels(chans), at_frame))
-        self._update(chans, "muted", bool(muted), source)
+        self._apply(SetMute(bool(muted), self._engine_channels(chans), at_frame), chans, "muted", bool(muted), source)
 
     def panic(self, *, source: str = "api") -> None:
         """Silence every channel now (intensity targets to 0, scheduled commands dropped)."""
-        self._submit(Panic())
-        self._update(tuple(range(self.channels)), "intensity", 0.0, source)
+        with self._lock:  # panic drops every scheduled command: nothing later-timed is waiting
+            for effective in self._effective:
+                effective.clear()
+        self._apply(Panic(), tuple(range(self.channels)), "intensity", 0.0, source)
 
     # ------------------------------------------------------------------ presets
     def load_preset(
