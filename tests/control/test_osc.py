@@ -14,7 +14,7 @@ from tests.control.osc_fakes import FakePeer, make_controller
 from vibsynth.config import load_config
 from vibsynth.control import osc
 from vibsynth.control.osc import OscHandler, SpeedCurve, StreamClock
-from vibsynth.control.osc_address import AddressSpace, normalize_prefix, pattern_to_regex
+from vibsynth.control.osc_address import AddressSpace, compile_pattern, normalize_prefix
 from vibsynth.control.osc_codec import (
     IMMEDIATE,
     Bundle,
@@ -145,7 +145,7 @@ def test_pattern_star_does_not_cross_slash():
 @pytest.mark.parametrize("bad", ["/vibsynth/ch/[1/x", "/vibsynth/{a,b", "/vibsynth/]", "/x/" + "*" * 300])
 def test_pattern_errors(bad):
     with pytest.raises(ParameterError):
-        pattern_to_regex(bad)
+        compile_pattern(bad)
 
 
 def test_prefix_validation():

@@ -4,14 +4,22 @@ The address space is a fixed table built once from the prefix and the channel co
 e.g. ``/vibsynth/intensity`` (all channels) and ``/vibsynth/ch/2/intensity``
 (channel 2, 1-based in addresses, 0-based in :class:`Route`). An incoming address
 is looked up directly when it holds no pattern characters (the fast path for
-every-frame VR traffic); otherwise it is translated to a regular expression
+every-frame VR traffic); otherwise it is compiled by :func:`compile_pattern`
 (OSC 1.0: ``?``, ``*``, ``[abc]``, ``[a-z]``, ``[!abc]``, ``{foo,bar}``) and matched
 against the whole table. Pattern results are cached (bounded), so a client
-sending ``/vibsynth/ch/*/intensity`` every frame pays for the regex once.
+sending ``/vibsynth/ch/*/intensity`` every frame pays for the match once.
+
+Matching never backtracks. A pattern is split at ``/`` into parts (``*`` and ``?``
+never cross ``/``), and each part is matched against one address part by a
+dynamic programme over the set of reachable positions in the address part, one
+pattern token at a time: time O(len(pattern part) x len(address part)), memory
+O(len(address part)). A pattern of at most :data:`MAX_PATTERN_LEN` characters
+therefore costs at most a few milliseconds against the whole table, whatever
+its shape (a translated regular expression backtracked exponentially on
+``/vibsynth/******...x``). A pattern may lead to at most :data:`MAX_FANOUT` routes.
 """
 from __future__ import annotations
 
-import re
 from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Iterable
@@ -20,15 +28,30 @@ from vibsynth.errors import ConfigError, ParameterError
 
 __all__ = [
     "PATTERN_CHARS",
+    "MAX_PATTERN_LEN",
+    "MAX_FANOUT",
     "Route",
+    "AddressPattern",
     "AddressSpace",
-    "pattern_to_regex",
+    "compile_pattern",
     "normalize_prefix",
     "GLOBAL_METHODS",
     "CHANNEL_METHODS",
 ]
 
 PATTERN_CHARS = frozenset("*?[]{}")
+
+MAX_PATTERN_LEN = 256
+"""Longest address pattern accepted (characters); longer patterns get an error reply."""
+
+MAX_FANOUT = 1024
+"""Most routes one pattern may lead to; a pattern matching more is an error (nothing is done).
+
+The table holds ``14 + 8 x channels`` routes, 526 at the maximum of 64 channels
+(``audio.channels``), so every pattern, ``/vibsynth/ch/*/intensity`` and even
+``/vibsynth/*/*/*`` included, fits on every supported configuration; the cap bounds the
+work of one message should the table ever grow.
+"""
 
 GLOBAL_METHODS = (
     "intensity", "balance", "texture", "glide", "mute", "panic", "preset", "speed",
@@ -39,7 +62,11 @@ GLOBAL_METHODS = (
 CHANNEL_METHODS = ("intensity", "balance", "texture", "glide", "mute", "preset", "speed", "get")
 """Methods under ``{prefix}/ch/{n}/``; they act on channel n only."""
 
-_MAX_PATTERN_LEN = 256
+# Token kinds of a compiled pattern part.
+_LITERAL, _ANY, _STAR, _SET, _CHOICE = range(5)
+
+Token = tuple[int, object]
+"""``(kind, argument)``: literal text, ``?``, ``*``, a character set ``(negate, ranges)``, or words."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,68 +93,172 @@ def normalize_prefix(prefix: str | None) -> str:
     return prefix
 
 
-def pattern_to_regex(pattern: str) -> re.Pattern[str]:
-    """Translate an OSC 1.0 address pattern into a compiled, anchored regular expression.
+# ---------------------------------------------------------------------- compiling
+def _char_set(body: str) -> tuple[bool, tuple[tuple[str, str], ...]]:
+    """Parse the inside of ``[...]``: ``(negate, ((low, high), ...))``.
+
+    ``a-z`` is a range (a reversed one is read low to high); a ``-`` first or last is literal.
 
     Raises
     ------
     ParameterError
-        For an unbalanced ``[`` or ``{`` or an over-long pattern.
+        For an empty set.
     """
-    if len(pattern) > _MAX_PATTERN_LEN:
-        raise ParameterError(f"address pattern longer than {_MAX_PATTERN_LEN} characters")
-    out = []
-    i, n = 0, len(pattern)
-    while i < n:
-        c = pattern[i]
+    negate = body.startswith("!")
+    if negate:
+        body = body[1:]
+    if not body:
+        raise ParameterError("empty '[...]' in address pattern")
+    ranges = []
+    j = 0
+    while j < len(body):
+        if j + 2 < len(body) and body[j + 1] == "-":
+            low, high = sorted((body[j], body[j + 2]))
+            ranges.append((low, high))
+            j += 3
+        else:
+            ranges.append((body[j], body[j]))
+            j += 1
+    return negate, tuple(ranges)
+
+
+def _closing(part: str, start: int, close: str) -> int:
+    """Index of ``close`` after ``part[start]`` (an opening bracket); ParameterError when missing."""
+    end = part.find(close, start + 1)
+    if end < 0:
+        raise ParameterError(f"unbalanced '{part[start]}' in address pattern")
+    return end
+
+
+def _compile_part(part: str) -> tuple[Token, ...]:
+    """Tokens of one pattern part (no ``/`` inside); adjacent literals merged, ``**`` = ``*``.
+
+    Raises
+    ------
+    ParameterError
+        For an unbalanced ``[``, ``]``, ``{`` or ``}``, or an empty ``[]``.
+    """
+    tokens: list[Token] = []
+    literal: list[str] = []
+
+    def push(kind: int, arg: object = None) -> None:
+        if literal:
+            tokens.append((_LITERAL, "".join(literal)))
+            literal.clear()
+        if kind == _STAR and tokens and tokens[-1][0] == _STAR:
+            return
+        tokens.append((kind, arg))
+
+    i = 0
+    while i < len(part):
+        c = part[i]
         if c == "*":
-            out.append("[^/]*")
+            push(_STAR)
         elif c == "?":
-            out.append("[^/]")
+            push(_ANY)
         elif c == "[":
-            end = pattern.find("]", i + 1)
-            if end < 0:
-                raise ParameterError("unbalanced '[' in address pattern")
-            body = pattern[i + 1:end]
-            negate = body.startswith("!")
-            if negate:
-                body = body[1:]
-            if not body or "/" in body:
-                raise ParameterError("empty or invalid '[...]' in address pattern")
-            parts = []
-            j = 0
-            while j < len(body):
-                if j + 2 < len(body) and body[j + 1] == "-":
-                    lo, hi = body[j], body[j + 2]
-                    if lo > hi:
-                        lo, hi = hi, lo
-                    parts.append(f"{re.escape(lo)}-{re.escape(hi)}")
-                    j += 3
-                else:
-                    parts.append(re.escape(body[j]))
-                    j += 1
-            out.append(("[^/" if negate else "[") + "".join(parts) + "]")
+            end = _closing(part, i, "]")
+            push(_SET, _char_set(part[i + 1:end]))
             i = end
         elif c == "{":
-            end = pattern.find("}", i + 1)
-            if end < 0:
-                raise ParameterError("unbalanced '{' in address pattern")
-            words = pattern[i + 1:end].split(",")
-            if any("/" in w for w in words):
-                raise ParameterError("'/' inside '{...}' in address pattern")
-            out.append("(?:" + "|".join(re.escape(w) for w in words) + ")")
+            end = _closing(part, i, "}")
+            push(_CHOICE, tuple(sorted(set(part[i + 1:end].split(",")))))
             i = end
         elif c in "]}":
             raise ParameterError(f"unbalanced '{c}' in address pattern")
         else:
-            out.append(re.escape(c))
+            literal.append(c)
         i += 1
-    try:
-        return re.compile("".join(out) + r"\Z")
-    except re.error as exc:  # e.g. a reversed range that escaped the checks above
-        raise ParameterError(f"invalid address pattern: {exc}") from None
+    if literal:
+        tokens.append((_LITERAL, "".join(literal)))
+    return tuple(tokens)
 
 
+def _in_set(char: str, spec: tuple[bool, tuple[tuple[str, str], ...]]) -> bool:
+    negate, ranges = spec
+    return any(low <= char <= high for low, high in ranges) != negate
+
+
+def _step(kind: int, arg: object, text: str, positions: set[int]) -> set[int]:
+    """Positions in ``text`` reachable after one more token, from ``positions`` (all <= len(text))."""
+    n = len(text)
+    if kind == _STAR:
+        return set(range(min(positions), n + 1))
+    if kind == _LITERAL:
+        assert isinstance(arg, str)
+        return {i + len(arg) for i in positions if text.startswith(arg, i)}
+    if kind == _ANY:
+        return {i + 1 for i in positions if i < n}
+    if kind == _SET:
+        return {i + 1 for i in positions if i < n and _in_set(text[i], arg)}  # type: ignore[arg-type]
+    assert isinstance(arg, tuple)
+    return {i + len(word) for i in positions for word in arg if text.startswith(word, i)}
+
+
+def _match_part(tokens: tuple[Token, ...], text: str) -> bool:
+    """Does one compiled pattern part match the whole address part ``text``?
+
+    A dynamic programme over positions: after each token, the set of positions in
+    ``text`` where a match of the tokens so far can end. Each token costs
+    O(len(text) x its length), so the whole part O(len(text) x len(pattern part)).
+    """
+    positions = {0}
+    for kind, arg in tokens:
+        positions = _step(kind, arg, text, positions)
+        if not positions:
+            return False
+    return len(text) in positions
+
+
+class AddressPattern:
+    """A compiled OSC 1.0 address pattern; :meth:`matches` tests one concrete address.
+
+    Parameters
+    ----------
+    pattern : str
+        E.g. ``/vibsynth/ch/[1-3]/{intensity,balance}``.
+
+    Raises
+    ------
+    ParameterError
+        For an over-long pattern (more than :data:`MAX_PATTERN_LEN` characters) or an
+        unbalanced ``[``/``{``/``]``/``}`` or empty ``[]``.
+    """
+
+    __slots__ = ("pattern", "parts")
+
+    def __init__(self, pattern: str) -> None:
+        if len(pattern) > MAX_PATTERN_LEN:
+            raise ParameterError(f"address pattern longer than {MAX_PATTERN_LEN} characters")
+        self.pattern = pattern
+        self.parts = tuple(_compile_part(part) for part in pattern.split("/"))
+
+    def literal(self, index: int) -> str | None:
+        """The text of part ``index`` when it holds no wildcard (None otherwise)."""
+        tokens = self.parts[index]
+        if not tokens:
+            return ""
+        if len(tokens) == 1 and tokens[0][0] == _LITERAL:
+            return tokens[0][1]  # type: ignore[return-value]
+        return None
+
+    def matches_part(self, index: int, text: str) -> bool:
+        """Does part ``index`` (0 = before the first ``/``) match the address part ``text``?"""
+        return _match_part(self.parts[index], text)
+
+    def matches(self, address: str) -> bool:
+        """Does the pattern match the whole concrete ``address``?"""
+        texts = address.split("/")
+        return len(texts) == len(self.parts) and all(
+            _match_part(tokens, text) for tokens, text in zip(self.parts, texts))
+
+
+def compile_pattern(pattern: str) -> AddressPattern:
+    """Compile an OSC 1.0 address pattern (see :class:`AddressPattern`)."""
+    return AddressPattern(pattern)
+
+
+# ---------------------------------------------------------------------- the table
 class AddressSpace:
     """The table of concrete addresses and the matcher.
 
@@ -138,19 +269,28 @@ class AddressSpace:
     channels : int
         Number of engine channels (addresses use 1..channels).
     cache_size : int
-        Most distinct patterns remembered.
+        Most distinct patterns remembered (results and errors).
+    max_fanout : int
+        Most routes one pattern may lead to (:data:`MAX_FANOUT`).
     """
 
-    def __init__(self, prefix: str, channels: int, *, cache_size: int = 512) -> None:
+    def __init__(self, prefix: str, channels: int, *, cache_size: int = 512, max_fanout: int = MAX_FANOUT) -> None:
         self.prefix = normalize_prefix(prefix)
         self.channels = int(channels)
+        self.max_fanout = int(max_fanout)
         self._routes: dict[str, Route] = {}
         for method in GLOBAL_METHODS:
             self._routes[f"{self.prefix}/{method}"] = Route(method, None)
         for ch in range(self.channels):
             for method in CHANNEL_METHODS:
                 self._routes[f"{self.prefix}/ch/{ch + 1}/{method}"] = Route(method, ch)
-        self._cache: OrderedDict[str, tuple[Route, ...]] = OrderedDict()
+        self._tree: dict = {}  # address parts -> nested dicts; the Route under the key None
+        for address, route in self._routes.items():
+            node = self._tree
+            for text in address.split("/"):
+                node = node.setdefault(text, {})
+            node[None] = route
+        self._cache: OrderedDict[str, tuple[Route, ...] | str] = OrderedDict()
         self._cache_size = cache_size
 
     @property
@@ -170,7 +310,8 @@ class AddressSpace:
         Raises
         ------
         ParameterError
-            For an invalid pattern (unbalanced brackets, too long).
+            For an invalid pattern (unbalanced brackets, too long) or one leading to
+            more than ``max_fanout`` routes (then nothing at all is done).
         """
         route = self._routes.get(address)
         if route is not None:
@@ -178,15 +319,57 @@ class AddressSpace:
         if not any(c in PATTERN_CHARS for c in address):
             return ()
         cached = self._cache.get(address)
-        if cached is not None:
+        if cached is None:
+            try:
+                cached = self._search(address)
+            except ParameterError as exc:
+                cached = str(exc)
+            self._cache[address] = cached
+            if len(self._cache) > self._cache_size:
+                self._cache.popitem(last=False)
+        else:
             self._cache.move_to_end(address)
-            return cached
-        regex = pattern_to_regex(address)
-        found = tuple(r for a, r in self._routes.items() if regex.match(a))
-        self._cache[address] = found
-        if len(self._cache) > self._cache_size:
-            self._cache.popitem(last=False)
-        return found
+        if isinstance(cached, str):
+            raise ParameterError(cached)
+        return cached
+
+    def _search(self, address: str) -> tuple[Route, ...]:
+        """Match a pattern against the whole table (uncached).
+
+        The table is a tree of address parts; a pattern part that is plain text is a
+        dictionary lookup, any other is matched against each child part once per node
+        (a few dozen distinct parts in all: the prefix, ``ch``, channel numbers, methods).
+        """
+        pattern = AddressPattern(address)
+        found: list[Route] = []
+        self._walk(pattern, self._tree, 0, {}, found)
+        if len(found) > self.max_fanout:
+            raise ParameterError(f"address pattern matches {len(found)} addresses, more than the limit of "
+                                 f"{self.max_fanout}; nothing was done")
+        return tuple(found)
+
+    def _walk(self, pattern: AddressPattern, node: dict, index: int, seen: dict[tuple[int, str], bool],
+              found: list[Route]) -> None:
+        """Collect (in table order) the routes below ``node`` matching pattern parts ``index..``."""
+        if index == len(pattern.parts):
+            route = node.get(None)
+            if route is not None:
+                found.append(route)
+            return
+        literal = pattern.literal(index)
+        if literal is not None:
+            child = node.get(literal)
+            if child is not None:
+                self._walk(pattern, child, index + 1, seen, found)
+            return
+        for text, child in node.items():
+            if text is None:
+                continue
+            ok = seen.get((index, text))
+            if ok is None:
+                ok = seen[(index, text)] = pattern.matches_part(index, text)
+            if ok:
+                self._walk(pattern, child, index + 1, seen, found)
 
     @staticmethod
     def group(routes: Iterable[Route]) -> list[tuple[str, tuple[int, ...] | None]]:
