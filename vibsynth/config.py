@@ -26,7 +26,6 @@ API contract used by the rest of the package:
 from __future__ import annotations
 
 import copy
-import ipaddress
 import math
 import os
 import re
@@ -312,15 +311,13 @@ def _channel_list(value: Any) -> str | None:
 
 
 def _addresses(value: Any) -> str | None:
-    if not isinstance(value, list):
-        return "must be a list of IP addresses or networks"
-    for i, item in enumerate(value):
-        try:
-            ipaddress.ip_network(str(item), strict=False)
-        except ValueError:
-            return f"item {i} ({item!r}) is not an IP address or network (e.g. 192.168.1.0/24)"
-        if not isinstance(item, str):
-            return f"item {i} ({item!r}) must be a quoted string"
+    """``osc.allow``: checked by the OSC server's own parser, so what passes here starts the server."""
+    from vibsynth.control.osc_server import parse_allow_list  # lazy: the server imports the engine
+
+    try:
+        parse_allow_list(value)
+    except ConfigError as exc:
+        return str(exc)
     return None
 
 
@@ -441,12 +438,15 @@ SCHEMA: dict[str, Spec] = {
     "osc.host": string(pattern=r"\S+", what="a host name or IP address"),
     "osc.port": number(0, 65535, integer=True, doc="0 = any free port"),
     "osc.prefix": string(pattern=r"(/[A-Za-z0-9_.\-]+)+", what="an OSC address like /vibsynth (no trailing /)"),
-    "osc.allow": custom("a list of IP addresses or networks, e.g. ['127.0.0.1', '192.168.1.0/24']",
+    "osc.allow": custom("a list of IP addresses, networks or 'localhost', e.g. ['127.0.0.1', '192.168.1.0/24']",
                         _addresses),
     "osc.reply_port": number(1, 65535, integer=True, nullable=True),
     "osc.schedule_horizon_s": number(0, 3600, low_open=True, unit="s"),
     "osc.notify_rate_hz": number(0, 1000, low_open=True, unit="Hz"),
     "osc.tcp": boolean(),
+    "osc.tcp_max_connections": number(1, 1024, integer=True),
+    "osc.tcp_max_per_peer": number(1, 1024, integer=True),
+    "osc.tcp_idle_timeout_s": number(0, 86400, low_open=True, unit="s"),
     # midi
     "midi.enabled": boolean(),
     "midi.port": any_of(string(nullable=True, what="a port name substring"), number(0, None, integer=True)),

@@ -17,8 +17,11 @@ from __future__ import annotations
 
 import argparse
 import bisect
+import functools
+import ipaddress
 import logging
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass
@@ -26,7 +29,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 from vibsynth import __version__
 from vibsynth.control.controller import Controller, KnobEvent, check_finite, check_range
-from vibsynth.control.osc_address import AddressSpace, normalize_prefix
+from vibsynth.control.osc_address import GLOBAL_METHODS, AddressSpace, normalize_prefix
 from vibsynth.control.osc_codec import (
     IMMEDIATE,
     MalformedPacket,
@@ -38,6 +41,9 @@ from vibsynth.control.osc_codec import (
 )
 from vibsynth.control.osc_server import (
     DEFAULT_RCVBUF,
+    TCP_IDLE_TIMEOUT_S,
+    TCP_MAX_CONNECTIONS,
+    TCP_MAX_PER_PEER,
     TcpSlipTransport,
     TransportStats,
     UdpTransport,
@@ -53,6 +59,11 @@ __all__ = [
     "OscStats",
     "OscHandler",
     "OscServer",
+    "REPLY_AMPLIFICATION",
+    "ReplyBudget",
+    "redact_paths",
+    "fit_osc_string",
+    "is_loopback",
     "add_arguments",
     "create",
 ]
@@ -64,6 +75,114 @@ SPEED_SOURCE = "osc-speed"
 _NUMERIC = frozenset("ifdh")
 _COALESCED = frozenset({"intensity", "balance", "texture", "speed"})
 _LOOPBACK = {"127.0.0.1", "::1", "localhost"}
+
+REPLY_AMPLIFICATION = 3
+"""UDP replies to a client on another host total at most this many times the bytes of the
+packet that caused them (the anti-amplification limit of QUIC, RFC 9000 section 8.1): a
+forged source address cannot turn the server into an amplifier. Error replies are cut to
+fit; other replies that do not fit are not sent (counted) and an error says why. Clients on
+this host and TCP clients (whose address the handshake proved) are not limited."""
+
+
+@functools.lru_cache(maxsize=1024)
+def is_loopback(host: str) -> bool:
+    """Is ``host`` (an IP address string, IPv4-mapped IPv6 included) a loopback address?"""
+    try:
+        ip = ipaddress.ip_address(host.split("%", 1)[0])
+    except ValueError:
+        return False
+    if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+        ip = ip.ipv4_mapped
+    return ip.is_loopback
+
+
+# An absolute path: /a/b, ~/a, C:\a or C:/a, not preceded by a word character or a path
+# character (so "mm/s" and "a/b" are left alone). One character class repeated: linear time.
+_PATH = re.compile(r"(?<![\w.~/\\-])(?:~|[A-Za-z]:)?[/\\][^\s'\"`,;:()\[\]{}<>]+")
+_OWN_PARTS = frozenset(GLOBAL_METHODS) | {"ch"}
+
+
+def _is_osc_address(token: str, prefix: str) -> bool:
+    if prefix:
+        return token == prefix or token.startswith(prefix + "/")
+    parts = token.split("/")
+    return "\\" not in token and len(parts) > 1 and parts[1] in _OWN_PARTS
+
+
+def redact_paths(text: str, prefix: str = "/vibsynth") -> str:
+    """Replace every absolute file-system path in ``text`` by its base name (``<path>`` if none).
+
+    Error messages sent to the network must not disclose where files live (user names,
+    folders); ``/home/ana/.config/vibsynth/presets/x.yaml:3: ...`` becomes ``x.yaml:3: ...``.
+    OSC addresses under ``prefix`` (e.g. ``/vibsynth/ch/1/intensity``) are kept.
+    """
+    def replace(match: re.Match[str]) -> str:
+        token = match.group(0)
+        if _is_osc_address(token, prefix):
+            return token
+        name = token.rstrip("/\\").replace("\\", "/").rsplit("/", 1)[-1]
+        return name if name and name != "~" and not name.endswith(":") else "<path>"
+
+    return _PATH.sub(replace, text)
+
+
+def _osc_string_size(text: str) -> int:
+    """Bytes ``text`` takes in an OSC message (UTF-8, NUL-terminated, padded to 4)."""
+    return (len(text.encode("utf-8")) // 4 + 1) * 4
+
+
+def fit_osc_string(text: str, size: int) -> str:
+    """``text``, cut (ending in ``...``) so that it takes at most ``size`` bytes in an OSC message.
+
+    ``size`` >= 4 (the empty string's size).
+    """
+    limit = (size // 4) * 4 - 1  # longest UTF-8 text that fits
+    raw = text.encode("utf-8")
+    if len(raw) <= limit:
+        return text
+    if limit < 3:
+        return raw[:max(limit, 0)].decode("utf-8", "ignore")
+    return raw[:limit - 3].decode("utf-8", "ignore") + "..."
+
+
+class ReplyBudget:
+    """A UDP peer on another host, seen while one request is handled: its replies share a byte budget.
+
+    Parameters
+    ----------
+    peer : PeerLike
+        The real peer.
+    limit : int
+        Bytes all replies to this request may take (:data:`REPLY_AMPLIFICATION` x its size).
+    on_refused : callable
+        ``on_refused(budget, size)`` when a reply of ``size`` bytes does not fit (not sent).
+    """
+
+    __slots__ = ("peer", "limit", "room", "request", "refused", "_on_refused")
+
+    def __init__(self, peer: PeerLike, limit: int, on_refused: Callable[["ReplyBudget", int], None]) -> None:
+        self.peer = peer
+        self.limit = limit
+        self.room = limit
+        self.request = ""
+        self.refused = False
+        self._on_refused = on_refused
+
+    @property
+    def key(self) -> tuple:
+        return self.peer.key
+
+    @property
+    def address(self) -> tuple[str, int] | None:
+        return getattr(self.peer, "address", None)
+
+    def send(self, data: bytes) -> bool:
+        """Send when it fits in what is left of the budget; otherwise report it and send nothing."""
+        if len(data) > self.room:
+            self._on_refused(self, len(data))
+            return False
+        self.room -= len(data)
+        return self.peer.send(data)
 
 
 class OscArgumentError(ParameterError):
@@ -181,6 +300,8 @@ class OscStats:
     malformed: int = 0
     errors: int = 0
     error_replies_suppressed: int = 0
+    replies_truncated: int = 0   # error replies cut to the UDP reply budget
+    replies_dropped: int = 0     # replies not sent: over the UDP reply budget
 
 
 class _TokenBucket:
@@ -308,7 +429,12 @@ class OscHandler:
 
     # -------------------------------------------------------------- entry points
     def handle_packet(self, data: bytes, peer: PeerLike) -> None:
-        """Handle one datagram (or SLIP frame): decode, schedule, dispatch; never raises for bad input."""
+        """Handle one datagram (or SLIP frame): decode, schedule, dispatch; never raises for bad input.
+
+        Replies to a UDP peer on another host total at most :data:`REPLY_AMPLIFICATION` x
+        ``len(data)`` bytes (see :class:`ReplyBudget`).
+        """
+        peer = self._limit_replies(peer, len(data))
         try:
             packet = decode_packet(data)
         except MalformedPacket as exc:
@@ -367,6 +493,8 @@ class OscHandler:
     def handle_message(self, msg: Message, peer: PeerLike, at_frame: int | None = None) -> None:
         """Route one decoded message (to every method its address pattern matches)."""
         self.stats.messages += 1
+        if isinstance(peer, ReplyBudget):
+            peer.request = msg.address
         try:
             routes = self.space.match(msg.address)
         except ParameterError as exc:
@@ -416,10 +544,47 @@ class OscHandler:
         self.stats.errors += 1
         self.controller.count_error(kind)
         log.debug("OSC error %s: %s: %s", kind, address, message)
-        if self._error_bucket.take():
-            peer.send(encode_message(self._error_address, (address, message), "ss"))
-        else:
+        if not self._error_bucket.take():
             self.stats.error_replies_suppressed += 1
+            return
+        room = peer.room if isinstance(peer, ReplyBudget) else None
+        data = self._error_packet(address, redact_paths(message, self.prefix), room)
+        if data is None:
+            self.stats.replies_dropped += 1
+        else:
+            peer.send(data)
+
+    def _error_packet(self, address: str, message: str, room: int | None) -> bytes | None:
+        """``/error address message`` in at most ``room`` bytes (None = any size): cut to fit, None if impossible."""
+        data = encode_message(self._error_address, (address, message), "ss")
+        if room is None or len(data) <= room:
+            return data
+        strings = room - (len(encode_message(self._error_address, ("", ""), "ss")) - 8)  # room for both strings
+        if strings < 8:
+            return None
+        self.stats.replies_truncated += 1
+        address = fit_osc_string(address, min(_osc_string_size(address), strings - 4))
+        message = fit_osc_string(message, strings - _osc_string_size(address))
+        return encode_message(self._error_address, (address, message), "ss")
+
+    def _limit_replies(self, peer: PeerLike, request_size: int) -> PeerLike:
+        """``peer`` itself, or a :class:`ReplyBudget` for a UDP peer on another host."""
+        if not getattr(peer, "datagram", False):
+            return peer
+        address = getattr(peer, "address", None)
+        if address and is_loopback(str(address[0])):
+            return peer
+        return ReplyBudget(peer, REPLY_AMPLIFICATION * request_size, self._reply_refused)
+
+    def _reply_refused(self, budget: ReplyBudget, size: int) -> None:
+        """A reply did not fit in the UDP reply budget: count it; say why once per request (if that fits)."""
+        self.stats.replies_dropped += 1
+        if budget.refused:
+            return
+        budget.refused = True
+        self._error(budget, budget.request, f"reply of {size} bytes not sent: replies to a UDP client on another "
+                    f"host total at most {REPLY_AMPLIFICATION}x the request ({budget.limit} bytes); use TCP "
+                    "(osc.tcp) or a longer request", "osc.reply_limit")
 
     def _reply(self, peer: PeerLike, address: str, args: Sequence[object] = (), types: str | None = None) -> None:
         peer.send(encode_message(address, args, types))
@@ -550,6 +715,7 @@ class OscHandler:
         ]
         if self.extra_status is not None:
             pairs.extend(self.extra_status())
+        pairs += [("replies_truncated", self.stats.replies_truncated), ("replies_dropped", self.stats.replies_dropped)]
         for ch, s in enumerate(ctl.state()):
             pairs += [(f"ch{ch + 1}.intensity", float(s.intensity)), (f"ch{ch + 1}.balance", float(s.balance)),
                       (f"ch{ch + 1}.glide", float(s.glide_s * 1000.0)), (f"ch{ch + 1}.mute", int(s.muted)),
@@ -595,10 +761,13 @@ class OscHandler:
         on = _flag(msg, 0, "notify")
         if self.notifier is None:
             raise VibsynthError("notifications are not available")
-        if on and not self.notifier.subscribe(peer):
+        target = peer.peer if isinstance(peer, ReplyBudget) else peer  # pushes are not replies to this packet
+        if on and not self.notifier.subscribe(target):
             raise VibsynthError(f"too many notify subscribers (max {self.notifier.max_subscribers})")
         if not on:
-            self.notifier.unsubscribe(peer)
+            self.notifier.unsubscribe(target)
+        if hasattr(target, "keep_alive"):
+            target.keep_alive = on  # a TCP subscriber may stay silent (no idle timeout)
         self._reply(peer, f"{self.prefix}/done", (f"{self.prefix}/notify", int(on)), "si")
 
     def _on_learn(self, msg: Message, channels, peer, at_frame) -> None:
@@ -653,6 +822,8 @@ class OscServer:
     host, port : str, int
     prefix, allow, reply_port, schedule_horizon_s, notify_rate_hz, tcp, speed_curve
         See the ``osc:`` config section and docs/osc.md.
+    tcp_max_connections, tcp_max_per_peer, tcp_idle_timeout_s
+        TCP connection limits (see :class:`~vibsynth.control.osc_server.TcpSlipTransport`).
     block_size : int, optional
         Reported in status when the engine does not say.
     """
@@ -674,6 +845,9 @@ class OscServer:
         speed_curve: SpeedCurve | None = None,
         block_size: int | None = None,
         rcvbuf: int = DEFAULT_RCVBUF,
+        tcp_max_connections: int = TCP_MAX_CONNECTIONS,
+        tcp_max_per_peer: int = TCP_MAX_PER_PEER,
+        tcp_idle_timeout_s: float = TCP_IDLE_TIMEOUT_S,
     ) -> None:
         self.controller = controller
         self.stats = TransportStats()
@@ -684,17 +858,22 @@ class OscServer:
         self.handler = OscHandler(
             controller, prefix=prefix, speed_curve=speed_curve, schedule_horizon_s=schedule_horizon_s,
             notifier=self.notifier, sync_worker=self.sync_worker, block_size=block_size,
-            extra_status=self._transport_status,
+            extra_status=self._status_extras,
         )
         self.udp = UdpTransport(host, port, self.handler.handle_batch, allow=allow_set, reply_port=reply_port,
                                 rcvbuf=rcvbuf, stats=self.stats)
         self.tcp = (TcpSlipTransport(host, port, self.handler.handle_batch, allow=allow_set, stats=self.stats,
-                                     on_close=self.notifier.unsubscribe)
+                                     on_close=self.notifier.unsubscribe, max_connections=tcp_max_connections,
+                                     max_per_peer=tcp_max_per_peer, idle_timeout_s=tcp_idle_timeout_s)
                     if tcp else None)
         self._started = False
 
     def _reply_synced(self, peer: PeerLike, sync_id: int, ok: bool) -> None:
         self.handler.reply_synced(peer, sync_id, ok)
+
+    def _status_extras(self) -> list[tuple[str, object]]:
+        s = self.stats
+        return self._transport_status() + [("tcp_refused", s.tcp_refused), ("tcp_idle_closed", s.tcp_idle_closed)]
 
     def _transport_status(self) -> list[tuple[str, object]]:
         s = self.stats
@@ -818,9 +997,32 @@ def create(config: Any, args: argparse.Namespace | None, controller: Controller,
     allow = osc.get("allow") or []
     if isinstance(allow, str):
         allow = [allow]
+    tcp_limits = _tcp_limits(osc)
     block = (data.get("audio") or {}).get("block_size")
     return OscServer(
         controller, host=str(host), port=port, prefix=osc.get("prefix", "/vibsynth"), allow=allow,
         reply_port=reply_port, schedule_horizon_s=horizon, notify_rate_hz=rate, tcp=bool(osc.get("tcp", False)),
-        speed_curve=curve, block_size=int(block) if isinstance(block, int) else None,
+        speed_curve=curve, block_size=int(block) if isinstance(block, int) else None, **tcp_limits,
     )
+
+
+def _tcp_limits(osc: dict) -> dict[str, Any]:
+    """``tcp_max_connections``, ``tcp_max_per_peer``, ``tcp_idle_timeout_s`` from the ``osc`` section.
+
+    Raises
+    ------
+    ConfigError
+        For a value outside its range.
+    """
+    out: dict[str, Any] = {}
+    for key, default, low, high in (("tcp_max_connections", TCP_MAX_CONNECTIONS, 1, 1024),
+                                    ("tcp_max_per_peer", TCP_MAX_PER_PEER, 1, 1024)):
+        value = osc.get(key, default)
+        if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= high:
+            raise ConfigError(f"osc.{key} {value!r} is not an integer in [{low}, {high}]")
+        out[key] = value
+    idle = osc.get("tcp_idle_timeout_s", TCP_IDLE_TIMEOUT_S)
+    if not isinstance(idle, (int, float)) or isinstance(idle, bool) or not (math.isfinite(idle) and 0 < idle <= 86400):
+        raise ConfigError(f"osc.tcp_idle_timeout_s {idle!r} is not a number in (0, 86400] s")
+    out["tcp_idle_timeout_s"] = float(idle)
+    return out

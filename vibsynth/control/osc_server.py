@@ -6,15 +6,23 @@ callback on their single receive thread: after waiting for the first packet, the
 thread drains whatever else is already queued in the socket (up to
 :data:`MAX_BATCH`), so the handler can coalesce moves that arrived together. ``peer.send(data)`` replies to the sender (UDP:
 its address, or the configured reply port on its host; TCP: the same connection).
+
+Limits: TCP connections are bounded (:data:`TCP_MAX_CONNECTIONS` in all,
+:data:`TCP_MAX_PER_PEER` per client address) and closed after :data:`TCP_IDLE_TIMEOUT_S`
+without a complete packet, so stalled clients cannot lock others out. The allow-list
+is parsed by :func:`parse_allow_list`, the very function that validates ``osc.allow``
+in the config, so a config that passes always starts the server.
 """
 from __future__ import annotations
 
 import errno
+import ipaddress
 import logging
 import select
 import selectors
 import socket
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
@@ -29,6 +37,12 @@ __all__ = [
     "slip_encode",
     "SlipDecoder",
     "resolve_allow_list",
+    "parse_allow_list",
+    "parse_allow_entry",
+    "AllowList",
+    "TCP_MAX_CONNECTIONS",
+    "TCP_MAX_PER_PEER",
+    "TCP_IDLE_TIMEOUT_S",
     "DEFAULT_RCVBUF",
 ]
 
@@ -36,6 +50,13 @@ log = logging.getLogger(__name__)
 
 DEFAULT_RCVBUF = 4 * 1024 * 1024
 MAX_DATAGRAM = 65536
+
+TCP_MAX_CONNECTIONS = 64
+"""Open TCP connections in all (``osc.tcp_max_connections``); twice the 32 /notify subscribers."""
+TCP_MAX_PER_PEER = 4
+"""Open TCP connections from one client IP address (``osc.tcp_max_per_peer``)."""
+TCP_IDLE_TIMEOUT_S = 30.0
+"""A TCP connection without a complete packet for this long is closed (``osc.tcp_idle_timeout_s``)."""
 _POLL_S = 0.25
 
 MAX_BATCH = 256
@@ -56,6 +77,8 @@ class TransportStats:
     tcp_connections: int = 0
     oversized_frames: int = 0
     handler_errors: int = 0
+    tcp_refused: int = 0
+    tcp_idle_closed: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +88,7 @@ class UdpPeer:
     address: tuple[str, int]
     reply_to: tuple[str, int]
     transport: "UdpTransport" = field(compare=False, hash=False, repr=False)
+    datagram = True  # replies to off-host peers are size-limited (OscHandler)
 
     @property
     def key(self) -> tuple:
@@ -75,12 +99,18 @@ class UdpPeer:
 
 
 class TcpPeer:
-    """A TCP client connection: replies are SLIP frames on the same connection."""
+    """A TCP client connection: replies are SLIP frames on the same connection.
+
+    ``keep_alive`` (set for /notify subscribers) exempts it from the idle timeout.
+    """
+
+    datagram = False
 
     def __init__(self, sock: socket.socket, address: tuple[str, int], stats: TransportStats) -> None:
         self.sock = sock
         self.address = address
         self.closed = False
+        self.keep_alive = False
         self._stats = stats
         self._lock = threading.Lock()
 
@@ -104,25 +134,130 @@ class TcpPeer:
             return False
 
 
-def resolve_allow_list(entries: Iterable[str] | None) -> frozenset[str] | None:
-    """Resolve configured client addresses/host names to a set of IP strings (None = allow all).
+Network = ipaddress.IPv4Network | ipaddress.IPv6Network
+
+LOCALHOST_NETWORKS = (ipaddress.ip_network("127.0.0.0/8"), ipaddress.ip_network("::1/128"))
+"""What the ``osc.allow`` entry ``localhost`` stands for."""
+
+
+def _entry_networks(entry: object) -> tuple[Network, ...] | str:
+    """The networks of one ``osc.allow`` entry, or why it is not valid (a phrase)."""
+    if not isinstance(entry, str):
+        return "must be a quoted string, e.g. '192.168.1.0/24'"
+    if entry.strip().lower() == "localhost":
+        return LOCALHOST_NETWORKS
+    try:
+        net = ipaddress.ip_network(entry, strict=False)
+    except ValueError:
+        return ("is not an IP address or network (e.g. 192.168.1.0/24, 10.0.0.0/8, ::1) or 'localhost'; "
+                "host names are not accepted")
+    mapped = net.network_address.ipv4_mapped if isinstance(net, ipaddress.IPv6Network) else None
+    if mapped is not None and net.prefixlen >= 96:  # ::ffff:10.0.0.0/104 is 10.0.0.0/8
+        return (ipaddress.ip_network(f"{mapped}/{net.prefixlen - 96}"),)
+    return (net,)
+
+
+def parse_allow_entry(entry: object) -> tuple[Network, ...]:
+    """The networks of one ``osc.allow`` entry.
+
+    An entry is an IP address (``192.168.1.20``, ``::1``), a network in CIDR notation
+    (``192.168.0.0/16``, ``10.0.0.0/8``, ``::1/128``; host bits are ignored, so
+    ``192.168.1.7/24`` is ``192.168.1.0/24``) or the word ``localhost`` (127.0.0.0/8 and
+    ::1). Host names are not accepted: the list is checked for every packet and must
+    not depend on a name server.
 
     Raises
     ------
     ConfigError
-        If a name cannot be resolved.
+        For anything else (the message says what is allowed).
     """
-    entries = list(entries or [])
-    if not entries:
-        return None
-    allowed = set()
-    for entry in entries:
+    found = _entry_networks(entry)
+    if isinstance(found, str):
+        raise ConfigError(f"{entry!r} {found}")
+    return found
+
+
+class AllowList:
+    """Client networks allowed to talk to the server; ``ip in allow_list`` tests a peer address.
+
+    Iterating yields the :mod:`ipaddress` networks. Membership answers are cached
+    (bounded), since the check runs for every packet. An IPv4 client seen by an IPv6
+    socket (``::ffff:192.168.1.20``) is checked as its IPv4 address.
+
+    Parameters
+    ----------
+    networks : iterable of IPv4Network or IPv6Network
+    """
+
+    _CACHE_MAX = 4096
+
+    def __init__(self, networks: Iterable[Network]) -> None:
+        self.networks = tuple(networks)
+        self._cache: dict[str, bool] = {}
+
+    def __iter__(self):
+        return iter(self.networks)
+
+    def __len__(self) -> int:
+        return len(self.networks)
+
+    def __repr__(self) -> str:
+        return f"AllowList({', '.join(str(n) for n in self.networks)})"
+
+    def __contains__(self, host: object) -> bool:
+        hit = self._cache.get(host)  # type: ignore[arg-type]
+        if hit is None:
+            hit = self._check(str(host))
+            if len(self._cache) < self._CACHE_MAX:
+                self._cache[str(host)] = hit
+        return hit
+
+    def _check(self, host: str) -> bool:
         try:
-            for info in socket.getaddrinfo(str(entry), None):
-                allowed.add(info[4][0])
-        except OSError as exc:
-            raise ConfigError(f"osc.allow: cannot resolve {entry!r}: {exc}") from None
-    return frozenset(allowed)
+            ip = ipaddress.ip_address(host.split("%", 1)[0])
+        except ValueError:
+            return False
+        if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+            ip = ip.ipv4_mapped
+        return any(ip in net for net in self.networks if net.version == ip.version)
+
+
+def parse_allow_list(entries: object) -> AllowList | None:
+    """Parse ``osc.allow``: a list of entries (see :func:`parse_allow_entry`); None = allow all.
+
+    This one function decides for both the config validator and the server, so a value
+    the config accepts always starts the server.
+
+    Raises
+    ------
+    ConfigError
+        If ``entries`` is not a list or an entry is invalid (``item {i} (...) is not ...``).
+    """
+    if entries is None:
+        return None
+    if not isinstance(entries, (list, tuple)):
+        raise ConfigError("must be a list of IP addresses or networks, e.g. ['127.0.0.1', '192.168.1.0/24']")
+    networks: list[Network] = []
+    for i, entry in enumerate(entries):
+        found = _entry_networks(entry)
+        if isinstance(found, str):
+            raise ConfigError(f"item {i} ({entry!r}) {found}")
+        networks.extend(found)
+    return AllowList(networks) if networks else None
+
+
+def resolve_allow_list(entries: Iterable[str] | None) -> AllowList | None:
+    """The server's allow-list from ``osc.allow`` (None = allow all); see :func:`parse_allow_list`.
+
+    Raises
+    ------
+    ConfigError
+        ``osc.allow: item 0 ('...') is not an IP address or network ...``.
+    """
+    try:
+        return parse_allow_list(list(entries) if isinstance(entries, (set, frozenset)) else entries)
+    except ConfigError as exc:
+        raise ConfigError(f"osc.allow: {exc}") from None
 
 
 # ---------------------------------------------------------------------- SLIP
@@ -144,6 +279,11 @@ class SlipDecoder:
         self._escape = False
         self._overflow = False
         self.oversized = 0
+
+    @property
+    def pending(self) -> bool:
+        """True while part of a frame has been received (a frame is open)."""
+        return bool(self._buf) or self._escape or self._overflow
 
     def feed(self, chunk: bytes) -> list[bytes]:
         """Add received bytes; return the complete frames (possibly none)."""
@@ -180,8 +320,8 @@ class UdpTransport:
         Bind address (port 0 picks a free port; see :attr:`port` after :meth:`open`).
     on_batch : callable
         ``on_batch([(data, peer), ...])``, called on the receive thread.
-    allow : frozenset of str or None
-        Client IPs accepted (None = all).
+    allow : AllowList or None
+        Client addresses accepted (None = all); see :func:`parse_allow_list`.
     reply_port : int or None
         Send replies to this port on the sender's host instead of the sender's port.
     rcvbuf : int
@@ -194,7 +334,7 @@ class UdpTransport:
         port: int,
         on_batch: BatchHandler,
         *,
-        allow: frozenset[str] | None = None,
+        allow: AllowList | None = None,
         reply_port: int | None = None,
         rcvbuf: int = DEFAULT_RCVBUF,
         stats: TransportStats | None = None,
@@ -304,8 +444,47 @@ class UdpTransport:
 
 
 # ---------------------------------------------------------------------- TCP
+class _Connection:
+    """One TCP connection: its peer, SLIP decoder and the time of its last complete packet."""
+
+    __slots__ = ("peer", "decoder", "last_packet")
+
+    def __init__(self, peer: TcpPeer, decoder: SlipDecoder, now: float) -> None:
+        self.peer = peer
+        self.decoder = decoder
+        self.last_packet = now
+
+
 class TcpSlipTransport:
-    """TCP listener with SLIP-framed OSC packets; one selector thread serves every connection."""
+    """TCP listener with SLIP-framed OSC packets; one selector thread serves every connection.
+
+    Stalled clients cannot lock others out: a new connection is refused (closed at
+    once, counted in ``tcp_refused``) when its address already holds ``max_per_peer``
+    connections or ``max_connections`` are open, and a connection that delivered no
+    complete packet for ``idle_timeout_s`` is closed (``tcp_idle_closed``). A
+    ``/notify`` subscriber (``peer.keep_alive``) may stay silent as long as it likes,
+    but not in the middle of a frame.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Bind address (port 0 picks a free port).
+    on_batch : callable
+        ``on_batch([(frame, peer), ...])``, called on the selector thread.
+    allow : AllowList or None
+        Client addresses accepted (None = all).
+    max_connections : int
+        Open connections in all (:data:`TCP_MAX_CONNECTIONS`).
+    max_per_peer : int
+        Open connections from one client IP address (:data:`TCP_MAX_PER_PEER`).
+    idle_timeout_s : float
+        Seconds without a complete packet before a connection is closed (:data:`TCP_IDLE_TIMEOUT_S`).
+    stats : TransportStats, optional
+    on_close : callable, optional
+        Called with the peer of every closed connection.
+    clock : callable
+        Monotonic clock in seconds (injectable for tests).
+    """
 
     def __init__(
         self,
@@ -313,23 +492,29 @@ class TcpSlipTransport:
         port: int,
         on_batch: BatchHandler,
         *,
-        allow: frozenset[str] | None = None,
-        max_connections: int = 16,
+        allow: AllowList | None = None,
+        max_connections: int = TCP_MAX_CONNECTIONS,
+        max_per_peer: int = TCP_MAX_PER_PEER,
+        idle_timeout_s: float = TCP_IDLE_TIMEOUT_S,
         stats: TransportStats | None = None,
         on_close: Callable[[TcpPeer], None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.host = host
         self.port = int(port)
         self.on_batch = on_batch
         self.on_close = on_close
         self.allow = allow
-        self.max_connections = max_connections
+        self.max_connections = int(max_connections)
+        self.max_per_peer = int(max_per_peer)
+        self.idle_timeout_s = float(idle_timeout_s)
+        self.clock = clock
         self.stats = stats or TransportStats()
         self.sock: socket.socket | None = None
         self._selector: selectors.DefaultSelector | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self._peers: dict[socket.socket, tuple[TcpPeer, SlipDecoder]] = {}
+        self._peers: dict[socket.socket, _Connection] = {}
 
     def open(self) -> None:
         family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
@@ -337,7 +522,7 @@ class TcpSlipTransport:
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.bind((self.host, self.port))
-            sock.listen(8)
+            sock.listen(64)
         except OSError:
             sock.close()
             raise
@@ -369,18 +554,33 @@ class TcpSlipTransport:
             self.sock.close()
             self.sock = None
 
+    @property
+    def connections(self) -> int:
+        """Open connections."""
+        return len(self._peers)
+
     def _drop(self, conn: socket.socket) -> None:
-        peer, _ = self._peers.pop(conn, (None, None))
+        entry = self._peers.pop(conn, None)
         try:
             if self._selector is not None:
                 self._selector.unregister(conn)
         except (KeyError, ValueError):
             pass
         conn.close()
-        if peer is not None:
-            peer.closed = True
+        if entry is not None:
+            entry.peer.closed = True
             if self.on_close is not None:
-                self.on_close(peer)
+                self.on_close(entry.peer)
+
+    def _refusal(self, ip: str) -> str | None:
+        """Why a new connection from ``ip`` is refused (None = accepted)."""
+        if self.allow is not None and ip not in self.allow:
+            return "not in osc.allow"
+        if len(self._peers) >= self.max_connections:
+            return f"{self.max_connections} connections open (the limit)"
+        if sum(1 for c in self._peers.values() if c.peer.address[0] == ip) >= self.max_per_peer:
+            return f"{self.max_per_peer} connections open from this address (the limit per client)"
+        return None
 
     def _accept(self) -> None:
         assert self.sock is not None and self._selector is not None
@@ -388,14 +588,61 @@ class TcpSlipTransport:
             conn, address = self.sock.accept()
         except OSError:
             return
-        if (self.allow is not None and address[0] not in self.allow) or len(self._peers) >= self.max_connections:
-            self.stats.denied += 1
+        reason = self._refusal(address[0])
+        if reason is not None:
+            if reason.startswith("not in"):
+                self.stats.denied += 1
+            else:
+                self.stats.tcp_refused += 1
+            log.debug("OSC: refused a TCP connection from %s: %s", address[0], reason)
             conn.close()
             return
         conn.setblocking(False)
         self.stats.tcp_connections += 1
-        self._peers[conn] = (TcpPeer(conn, address[:2], self.stats), SlipDecoder())
+        self._peers[conn] = _Connection(TcpPeer(conn, address[:2], self.stats), SlipDecoder(), self.clock())
         self._selector.register(conn, selectors.EVENT_READ)
+
+    def _expire_idle(self) -> None:
+        """Close connections without a complete packet for ``idle_timeout_s``."""
+        now = self.clock()
+        for conn, entry in list(self._peers.items()):
+            if now - entry.last_packet < self.idle_timeout_s:
+                continue
+            if entry.peer.keep_alive and not entry.decoder.pending:
+                continue
+            self.stats.tcp_idle_closed += 1
+            log.debug("OSC: closed the TCP connection of %s (no complete packet for %.0f s)",
+                      entry.peer.address[0], now - entry.last_packet)
+            self._drop(conn)
+
+    def _receive(self, conn: socket.socket) -> None:
+        """Read what a connection sent and hand its complete frames to the handler."""
+        try:
+            chunk = conn.recv(MAX_DATAGRAM)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            chunk = b""
+        if not chunk:
+            self._drop(conn)
+            return
+        entry = self._peers[conn]
+        peer, decoder = entry.peer, entry.decoder
+        before = decoder.oversized
+        frames = decoder.feed(chunk)
+        self.stats.oversized_frames += decoder.oversized - before
+        for frame in frames:
+            self.stats.packets += 1
+            self.stats.bytes += len(frame)
+        if frames:
+            entry.last_packet = self.clock()
+            try:
+                self.on_batch([(frame, peer) for frame in frames])
+            except Exception:
+                self.stats.handler_errors += 1
+                log.exception("OSC: handler failed on TCP frames from %s", peer.address[0])
+        if peer.closed:
+            self._drop(conn)
 
     def _run(self) -> None:
         assert self._selector is not None
@@ -403,30 +650,7 @@ class TcpSlipTransport:
             for key, _ in self._selector.select(timeout=_POLL_S):
                 if key.fileobj is self.sock:
                     self._accept()
-                    continue
-                conn = key.fileobj
-                assert isinstance(conn, socket.socket)
-                try:
-                    chunk = conn.recv(MAX_DATAGRAM)
-                except (BlockingIOError, InterruptedError):
-                    continue
-                except OSError:
-                    chunk = b""
-                if not chunk:
-                    self._drop(conn)
-                    continue
-                peer, decoder = self._peers[conn]
-                before = decoder.oversized
-                frames = decoder.feed(chunk)
-                self.stats.oversized_frames += decoder.oversized - before
-                for frame in frames:
-                    self.stats.packets += 1
-                    self.stats.bytes += len(frame)
-                if frames:
-                    try:
-                        self.on_batch([(frame, peer) for frame in frames])
-                    except Exception:
-                        self.stats.handler_errors += 1
-                        log.exception("OSC: handler failed on TCP frames from %s", peer.address[0])
-                if peer.closed:
-                    self._drop(conn)
+                elif key.fileobj in self._peers:
+                    assert isinstance(key.fileobj, socket.socket)
+                    self._receive(key.fileobj)
+            self._expire_idle()
