@@ -356,3 +356,170 @@ def test_load_10k_messages_per_second(jack_serve):
     assert after["errors"] == before["errors"]
     assert received == sent, f"lost {sent - received} of {sent} messages"
     assert underflows <= MAX_UNDERFLOWS
+
+
+# ---------------------------------------------------------------------- issue 12: patterns and limits
+def _host_address() -> str | None:
+    """A non-loopback address of this machine (a client 'on another host' for the reply limit), or None."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("192.0.2.123", 9))  # UDP connect sends nothing: it only picks the route
+        except OSError:
+            return None
+        address = probe.getsockname()[0]
+    return None if address.startswith("127.") else address
+
+
+def oscsend_to(host: str, port: int, address: str, types: str = "", *args: str) -> None:
+    subprocess.run(["oscsend", host, str(port), address, *([types, *args] if types else [])], check=True, timeout=10)
+
+
+def _status_from_dump(line: str) -> dict[str, str]:
+    """``"key" value`` pairs of an oscdump'ed /status.reply line."""
+    import re
+
+    return dict(re.findall(r'"([a-z_0-9.]+)" (-?[0-9.e+-]+)', line))
+
+
+@pytest.fixture(scope="module")
+def limits_serve(tmp_path_factory):
+    """serve on JACK, listening on every interface but allowing only this host (CIDR entries),
+    replies to oscdump, TCP with a 2 s idle timeout and 4 connections per client address."""
+    require_tools("oscsend", "oscdump")
+    if not jack_available():
+        unavailable("no JACK server reachable (run under scripts/with_jack.sh) or JACK-Client missing")
+    host_ip = _host_address()
+    allow = ["127.0.0.0/8", "::1/128", "10.0.0.0/8"] + ([f"{host_ip}/32"] if host_ip else [])
+    tmp = tmp_path_factory.mktemp("osc-limits")
+    dump_port = free_udp_port()
+    dump = OscDump(dump_port)
+
+    def ready(port: int) -> bool:
+        oscsend(port, "/vibsynth/ping", "i", "7")
+        try:
+            dump.wait_for("/vibsynth/pong", timeout=0.5)
+            return True
+        except AssertionError:
+            return False
+
+    extra = (f"  reply_port: {dump_port}\n  host: 0.0.0.0\n  allow: {allow!r}\n  tcp: true\n"
+             "  tcp_idle_timeout_s: 2\n  tcp_max_per_peer: 4\n")
+    env = dict(os.environ, VIBSYNTH_HOST_API="JACK", JACK_NO_AUDIO_RESERVATION="1")
+    proc, port = start_serve(tmp, output="sounddevice", env=env, extra_config=extra, ready=ready)
+    yield port, dump, host_ip
+    stop_serve(proc)
+    dump.close()
+
+
+def _drain(dump: OscDump) -> None:
+    while not dump.lines.empty():
+        dump.lines.get_nowait()
+
+
+def _dump_status(port: int, dump: OscDump) -> dict[str, str]:
+    oscsend(port, "/vibsynth/status")
+    return _status_from_dump(dump.wait_for("/vibsynth/status.reply"))
+
+
+def test_pathological_patterns_do_not_freeze_serve(limits_serve):
+    """Patterns that made the regex backtrack for seconds to forever: answered at once, audio keeps running."""
+    port, dump, _ = limits_serve
+    before = _dump_status(port, dump)
+    times = []
+    for pattern in ["/vibsynth/" + "*" * 28 + "x", "/vibsynth/" + "*" * 245 + "x", "/vibsynth/" + "*a" * 40 + "x"]:
+        start = time.monotonic()
+        oscsend(port, pattern, "f", "0.5")
+        line = dump.wait_for("/vibsynth/error", timeout=5.0)
+        times.append(time.monotonic() - start)
+        assert '"unknown address"' in line
+    start = time.monotonic()
+    oscsend(port, "/vibsynth/get", "s", "intensity")
+    dump.wait_for("/vibsynth/intensity", timeout=5.0)
+    get_s = time.monotonic() - start
+    after = _dump_status(port, dump)
+    rate = float(after["rate"])
+    print(f"\npathological pattern -> error reply (incl. oscsend start-up): {', '.join(f'{1e3 * t:.0f} ms' for t in times)}; "
+          f"then /get {1e3 * get_s:.0f} ms; underflows {int(after['underflows']) - int(before['underflows'])}; "
+          f"stream advanced {(int(after['frame']) - int(before['frame'])) / rate:.2f} s")
+    assert max(times) < 2.0 and get_s < 2.0
+    assert int(after["frame"]) > int(before["frame"])          # the audio stream kept going
+    assert int(after["underflows"]) - int(before["underflows"]) <= MAX_UNDERFLOWS
+
+
+def test_cidr_allow_list_starts_serve(limits_serve):
+    port, dump, _ = limits_serve            # osc.allow held 127.0.0.0/8, ::1/128, 10.0.0.0/8: serve started
+    status = _dump_status(port, dump)
+    assert int(status["denied"]) == 0
+
+
+def test_error_replies_have_no_paths_and_off_host_replies_are_small(limits_serve):
+    port, dump, host_ip = limits_serve
+    oscsend(port, "/vibsynth/preset", "s", "nosuch")
+    line = dump.wait_for("/vibsynth/error")
+    assert "unknown preset 'nosuch'" in line and str(ROOT) not in line and "/home/" not in line
+    assert " presets in " in line
+    if host_ip is None:
+        unavailable("this machine has no non-loopback IPv4 address to act as a client on another host")
+    _drain(dump)
+    oscsend_to(host_ip, port, "/vibsynth/status")                 # 24 bytes from a non-loopback address
+    line = dump.wait_for("/vibsynth/")                            # the first reply: no status.reply
+    assert line.startswith('/vibsynth/error ss "/vibsynth/status" "reply of'), line
+    address, message = line.split('"')[1], line.split('"')[3]
+    assert len(encode_message("/vibsynth/error", (address, message), "ss")) <= 3 * 24
+    oscsend_to(host_ip, port, "/vibsynth/preset", "s", "nosuch")  # 32 bytes: the error is cut to 96
+    line = dump.wait_for("/vibsynth/error")
+    message = line.split('"')[3]
+    assert message.startswith("unknown preset 'nosuch'") and message.endswith("...")
+    status = _dump_status(port, dump)
+    assert int(status["replies_dropped"]) >= 1 and int(status["replies_truncated"]) >= 2
+
+
+def _tcp_connect(port: int, source: str) -> socket.socket:
+    return socket.create_connection(("127.0.0.1", port), timeout=5.0, source_address=(source, 0))
+
+
+def _tcp_ping(conn: socket.socket, value: int) -> bool:
+    from vibsynth.control.osc_server import SlipDecoder, slip_encode
+
+    conn.settimeout(5.0)
+    try:
+        conn.sendall(slip_encode(encode_message("/vibsynth/ping", (value,))))
+        decoder = SlipDecoder()
+        while True:
+            chunk = conn.recv(4096)
+            if not chunk:
+                return False
+            if any(decode_packet(f).address == "/vibsynth/pong" for f in decoder.feed(chunk)):
+                return True
+    except OSError:
+        return False
+
+
+def _closed(conn: socket.socket, timeout: float) -> bool:
+    conn.settimeout(timeout)
+    try:
+        return conn.recv(1) == b""
+    except ConnectionResetError:
+        return True
+    except socket.timeout:
+        return False
+
+
+def test_stalled_tcp_clients_do_not_lock_out_others(limits_serve):
+    port, dump, _ = limits_serve
+    stalled = [_tcp_connect(port, "127.0.0.1") for _ in range(10)]
+    try:
+        for conn in stalled[:4]:
+            conn.sendall(b"\xc0/vibsynth/pi")                      # frames that never end
+        assert all(_closed(conn, 3.0) for conn in stalled[4:])    # over 4 per address: refused
+        with _tcp_connect(port, "127.0.0.2") as other:              # another address is served
+            assert _tcp_ping(other, 1)
+        assert all(_closed(conn, 6.0) for conn in stalled[:4])    # closed after the 2 s idle timeout
+        with _tcp_connect(port, "127.0.0.1") as again:              # and the same address is served again
+            assert _tcp_ping(again, 2)
+    finally:
+        for conn in stalled:
+            conn.close()
+    status = _dump_status(port, dump)
+    print(f"\nTCP: refused {status['tcp_refused']}, closed idle {status['tcp_idle_closed']}")
+    assert int(status["tcp_refused"]) >= 6 and int(status["tcp_idle_closed"]) >= 4
