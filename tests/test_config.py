@@ -310,3 +310,65 @@ def test_midi_nrpn_and_range_bindings_are_accepted_and_checked(tmp_path):
         bad.write_text(text)
         with pytest.raises(ConfigError, match=re.escape(needle)):
             load_config(bad)
+
+
+# --------------------------------------------------------------------------- the one YAML loader (issue 12)
+BOMB = "\n".join(["a: &a [x,x,x,x,x,x,x,x,x]"] + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]"
+                                                    for a, b in zip("abcdefgh", "bcdefghi")]) + "\n"
+
+
+def test_config_bomb_is_refused_fast_naming_file_and_line(tmp_path):
+    import time
+
+    path = write(tmp_path, "audio:\n  rate: 48000\n" + BOMB)
+    started = time.perf_counter()
+    with pytest.raises(ConfigError) as info:
+        check_config_file(path)
+    assert time.perf_counter() - started < 0.5
+    assert str(info.value).startswith(f"{path}:4:8: YAML alias '*a' (anchor '&a' on line 3): aliases are not "
+                                      "allowed in a config file")
+
+
+def test_config_merge_key_needs_an_alias_and_is_refused(tmp_path):
+    path = write(tmp_path, "base: &base {rate: 44100}\naudio:\n  <<: *base\n")
+    with pytest.raises(ConfigError, match=r"user.yaml:3:7: YAML alias '\*base' \(anchor '&base' on line 1\)"):
+        check_config_file(path)
+
+
+def test_oversized_and_deep_config_files(tmp_path):
+    big = write(tmp_path, "audio:\n  rate: 48000\n" + "#" * (2 << 20) + "\n", "big.yaml")
+    with pytest.raises(ConfigError, match=r"big.yaml: 2,097,174 bytes, over the 1 MiB limit for a config file; "
+                                           r"not read$"):
+        check_config_file(big)
+    deep = write(tmp_path, "audio: " + "[" * 10_000 + "]" * 10_000 + "\n", "deep.yaml")
+    with pytest.raises(ConfigError, match=r"deep.yaml:1:71: nested more than 64 levels deep"):
+        check_config_file(deep)
+
+
+def test_environment_and_command_line_values_go_through_the_same_loader():
+    with pytest.raises(ConfigError, match=r"^environment variable VIBSYNTH_DEVICE:1:12: YAML alias '\*x'"):
+        load_config(env={"VIBSYNTH_DEVICE": "[&x [1,2], *x]"}, user_file=False)
+    with pytest.raises(ConfigError, match=r"^command line: --set osc.allow:1:16: YAML alias"):
+        parse_override("osc.allow=[&x '1.2.3.4', *x]")
+    # text that is not YAML stays a plain string, as before
+    assert parse_override("audio.device=[Scarlett") == ("audio.device", "[Scarlett")
+    assert load_config(env={"VIBSYNTH_DEVICE": "Scarlett: 2i2 [USB"}, user_file=False).get("audio.device") \
+        == "Scarlett: 2i2 [USB"
+
+
+def test_long_values_are_shortened_in_messages(tmp_path):
+    path = write(tmp_path, "audio:\n  rate: [" + ", ".join(str(k) for k in range(50_000)) + "]\n")
+    with pytest.raises(ConfigError) as info:
+        check_config_file(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}:2: audio.rate = [0, 1, 2, 3, 4, 5, 6, 7, ...]: must be an integer")
+    assert len(message) < 300 + len(str(path))
+
+
+def test_actuator_profile_bomb_is_refused(tmp_path):
+    folder = tmp_path / "xdg-config" / "vibsynth" / "actuators"
+    folder.mkdir(parents=True)
+    (folder / "coil.yaml").write_text("name: coil\nresponse: [[40, 0]]\n" + BOMB)
+    config = load_config(overrides={"actuator.profile": "coil"}, user_file=False, env={})
+    with pytest.raises(ConfigError, match=r"coil.yaml:4:8: YAML alias '\*a' .* not allowed in an actuator profile"):
+        resolve_actuator_response(config)

@@ -29,6 +29,7 @@ import copy
 import math
 import os
 import re
+import reprlib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -129,8 +130,22 @@ def _walk_lines(node: yaml.Node, path: Path_, lines: dict[Path_, int], origin: s
             _walk_lines(item, path + (str(i),), lines, origin)
 
 
-def parse_yaml(text: str, origin: str, *, error: type[Exception] = ConfigError) -> YamlDocument:
+def _document(loaded: Any, error: type[Exception]) -> YamlDocument:
+    lines: dict[Path_, int] = {}
+    if loaded.node is not None:
+        try:
+            _walk_lines(loaded.node, (), lines, loaded.origin)
+        except ConfigError as exc:
+            raise error(str(exc)) from None
+    return YamlDocument(loaded.data, lines, loaded.origin)
+
+
+def parse_yaml(text: str, origin: str, *, error: type[Exception] = ConfigError,
+               what: str = "a config file") -> YamlDocument:
     """Parse YAML text, keeping the line of every key; duplicate keys are errors.
+
+    The text goes through :func:`vibsynth.io.load_yaml` (size cap, no aliases, bounded
+    nesting), the one YAML loader of vibsynth.
 
     Parameters
     ----------
@@ -138,41 +153,43 @@ def parse_yaml(text: str, origin: str, *, error: type[Exception] = ConfigError) 
     origin : str
         File name for messages.
     error : exception class
-        Raised (with ``origin:line:`` in the message) on syntax errors and duplicate keys.
+        Raised (with ``origin:line:`` in the message) on syntax errors, refused documents
+        and duplicate keys.
+    what : str
+        What the text is, for messages ("a preset").
 
     Returns
     -------
     document : YamlDocument
     """
-    loader = yaml.SafeLoader(text)
+    from vibsynth.io import load_yaml  # io imports numpy; keep config light to import
+
+    return _document(load_yaml(text=text, origin=origin, error=error, what=what), error)
+
+
+def read_yaml_file(path: str | os.PathLike[str], *, error: type[Exception] = ConfigError,
+                   what: str = "a config file") -> YamlDocument:
+    """Read and parse a YAML file (see :func:`parse_yaml`): at most :data:`vibsynth.io.MAX_YAML_BYTES`,
+    refused before reading when larger; missing/unreadable files raise ``error``."""
+    from vibsynth.io import load_yaml
+
+    return _document(load_yaml(Path(path).expanduser(), error=error, what=what), error)
+
+
+def yaml_value(text: str, origin: str) -> Any:
+    """A value written in YAML syntax (environment variable, ``--set``); text that is not
+    valid YAML is the string itself. Aliases and oversized values are still refused."""
+    from vibsynth.io import load_yaml
+
     try:
-        node = loader.get_single_node()
-        lines: dict[Path_, int] = {}
-        if node is None:
-            return YamlDocument(None, lines, origin)
-        try:
-            _walk_lines(node, (), lines, origin)
-        except ConfigError as exc:
-            raise error(str(exc)) from None
-        data = loader.construct_document(node)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        place = f"{origin}:{mark.line + 1}:{mark.column + 1}" if mark else origin
-        problem = " ".join(p for p in (exc.context, exc.problem) if p)
-        raise error(f"{place}: YAML syntax error: {problem}") from None
-    except yaml.YAMLError as exc:
-        raise error(f"{origin}: YAML error: {exc}") from None
-    finally:
-        loader.dispose()
-    return YamlDocument(data, lines, origin)
+        return load_yaml(text=text, origin=origin, error=ConfigError, what="a setting",
+                         syntax_error=_NotYaml).data
+    except _NotYaml:
+        return text
 
 
-def read_yaml_file(path: str | os.PathLike[str], *, error: type[Exception] = ConfigError) -> YamlDocument:
-    """Read and parse a YAML file (see :func:`parse_yaml`); missing/unreadable files raise ``error``."""
-    from vibsynth.io import read_text  # io imports the DSP layer; keep config light to import
-
-    p = Path(path).expanduser()
-    return parse_yaml(read_text(p, error=error), str(p), error=error)
+class _NotYaml(ConfigError):
+    """Internal: a setting that is not YAML syntax (read as a plain string)."""
 
 
 # --------------------------------------------------------------------------- field specs
@@ -180,10 +197,24 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+_SHORT = reprlib.Repr()
+_SHORT.maxlist = _SHORT.maxtuple = _SHORT.maxdict = 8
+_SHORT.maxstring = _SHORT.maxother = 80
+_SHORT.maxlevel = 4
+
+
+def short_repr(value: Any) -> str:
+    """``repr`` for error messages, bounded: a long list or text is cut with ``...`` (reprlib
+    never builds the full text, so a large value cannot blow up a message)."""
+    return _SHORT.repr(value)
+
+
 def _fmt(value: Any) -> str:
     if isinstance(value, float) and value.is_integer() and abs(value) < 1e15:
         return repr(value)
-    return repr(value) if isinstance(value, str) else str(value) if value is None or _is_number(value) else repr(value)
+    if value is None or _is_number(value):
+        return str(value)
+    return short_repr(value)
 
 
 @dataclass(frozen=True)
@@ -645,10 +676,7 @@ def user_config_file() -> Path:
 
 
 def _parse_env_value(name: str, text: str) -> Any:
-    try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError:
-        return text
+    value = yaml_value(text, f"environment variable {name}")
     return text if isinstance(value, (dict, list)) else value
 
 
@@ -762,10 +790,7 @@ def parse_override(text: str) -> tuple[str, Any]:
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
         raise ConfigError(f"command line: --set {text!r}: expected KEY=VALUE, e.g. --set audio.rate=44100")
-    try:
-        value = yaml.safe_load(raw) if raw.strip() else None
-    except yaml.YAMLError:
-        value = raw
+    value = yaml_value(raw, f"command line: --set {key.strip()}") if raw.strip() else None
     return key.strip(), value
 
 
@@ -812,7 +837,7 @@ def load_actuator_profile(name: str) -> dict[str, Any]:
     if name not in profiles:
         raise ConfigError(f"unknown actuator profile {name!r}{_close(name, list(profiles))} "
                           f"(available: {', '.join(sorted(profiles))})")
-    doc = read_yaml_file(profiles[name])
+    doc = read_yaml_file(profiles[name], what="an actuator profile")
     if not isinstance(doc.data, dict):
         raise ConfigError(f"{doc.origin}: an actuator profile must be a mapping with name, description, response")
     for key, value in doc.data.items():

@@ -108,3 +108,67 @@ def test_server_learn_binds_and_saves(tmp_path):
 
 def test_module_learn_hook_without_server_returns_false():
     assert learn("balance") is False
+
+
+# --------------------------------------------------------------------------- issue 12: one loader, one writer
+BOMB = "\n".join(["a: &a [x,x,x,x,x,x,x,x,x]"] + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]"
+                                                    for a, b in zip("abcdefgh", "bcdefghi")]) + "\n"
+
+
+def test_learn_refuses_a_bomb_config_and_leaves_it_untouched(tmp_path):
+    import time
+
+    import pytest
+
+    from vibsynth.errors import ConfigError
+
+    path = tmp_path / "config.yaml"
+    path.write_text(USER_CONFIG + BOMB, encoding="utf-8")
+    before = path.read_bytes()
+    started = time.perf_counter()
+    with pytest.raises(ConfigError) as info:
+        save_learned_mapping(path, [Binding("balance", cc=2)])
+    assert time.perf_counter() - started < 0.5
+    assert str(info.value).startswith(f"{path}:17:8: YAML alias '*a' (anchor '&a' on line 16): aliases are not "
+                                      "allowed in a config file")
+    assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["config.yaml"]
+
+
+def test_learn_goes_through_the_one_loader_and_the_one_writer(tmp_path, monkeypatch):
+    import stat
+
+    import vibsynth.io as vio
+
+    path = tmp_path / "config.yaml"
+    path.write_text(USER_CONFIG, encoding="utf-8")
+    path.chmod(0o640)
+    calls: list[tuple[str, object]] = []
+    real_load, real_write = vio.load_yaml, vio.atomic_write
+
+    def load_yaml(*args, **kwargs):
+        calls.append(("load", kwargs.get("round_trip")))
+        return real_load(*args, **kwargs)
+
+    def atomic_write(target, data):
+        calls.append(("write", str(target)))
+        return real_write(target, data)
+
+    monkeypatch.setattr(vio, "load_yaml", load_yaml)
+    monkeypatch.setattr(vio, "atomic_write", atomic_write)
+    save_learned_mapping(path, [Binding("balance", cc=2)])
+    assert calls == [("load", True), ("write", str(path))]
+    assert stat.S_IMODE(path.stat().st_mode) == 0o640  # the user's mode is kept
+    assert [p.name for p in tmp_path.iterdir()] == ["config.yaml"]  # no "config.yaml.tmp" left beside it
+    assert yaml.safe_load(path.read_text())["midi"]["mapping"]["balance"] == [{"cc": 2}]
+
+
+def test_learned_file_is_created_with_the_umask_mode(tmp_path):
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        save_learned_mapping(tmp_path / "new" / "config.yaml", [Binding("intensity", cc=7)])
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "new" / "config.yaml").stat().st_mode) == 0o644

@@ -206,10 +206,12 @@ def user_config_path(explicit: str | os.PathLike[str] | None = None) -> Path:
 def save_learned_mapping(path: str | os.PathLike[str], bindings: Iterable[Binding], knobs: Iterable[str] = KNOBS) -> None:
     """Write ``midi.mapping.<knob>`` for ``knobs`` into a YAML file, keeping its comments and other keys.
 
-    Uses ruamel.yaml round-trip mode; the file (and its folder) is created when
-    missing; the write is atomic (temporary file + rename). Bindings that come
-    from ``midi.nrpn`` shorthand keys are written as ``{nrpn: [msb, lsb]}``
-    entries only if they were learned.
+    Uses ruamel.yaml round-trip mode through :func:`vibsynth.io.load_yaml` (the one YAML
+    loader: size cap, no aliases, bounded nesting); the file (and its folder) is created
+    when missing; the write goes through :func:`vibsynth.io.atomic_write` (a crash leaves
+    the old file or the new one; the file keeps its mode). Bindings that come from
+    ``midi.nrpn`` shorthand keys are written as ``{nrpn: [msb, lsb]}`` entries only if
+    they were learned.
 
     Parameters
     ----------
@@ -218,19 +220,31 @@ def save_learned_mapping(path: str | os.PathLike[str], bindings: Iterable[Bindin
         The full current bindings.
     knobs : iterable of str
         Knobs whose lists are (re)written.
+
+    Raises
+    ------
+    ConfigError
+        The existing file is over the size cap, holds a YAML alias or a syntax error
+        (named by file and line; nothing is written).
+    OSError
+        The file cannot be written (the old one is untouched).
     """
+    import io as _io
+
     from ruamel.yaml import YAML
     from ruamel.yaml.comments import CommentedMap, CommentedSeq
 
-    yaml = YAML()  # round-trip
-    yaml.preserve_quotes = True
+    from vibsynth.errors import ConfigError
+    from vibsynth.io import atomic_write, load_yaml
+
     path = Path(path)
     doc = None
     if path.exists():
-        with path.open("r", encoding="utf-8") as fh:
-            doc = yaml.load(fh)
+        doc = load_yaml(path, round_trip=True, error=ConfigError, what="a config file").data
     if doc is None:
         doc = CommentedMap()
+    if not isinstance(doc, dict):
+        raise ConfigError(f"{path}: the config must be a mapping of sections, not {type(doc).__name__}")
     midi = doc.get("midi")
     if midi is None:
         midi = doc["midi"] = CommentedMap()
@@ -247,11 +261,9 @@ def save_learned_mapping(path: str | os.PathLike[str], bindings: Iterable[Bindin
                 entries.append(item)
         entries.fa.set_flow_style()
         mapping[knob] = entries
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w", encoding="utf-8") as fh:
-        yaml.dump(doc, fh)
-    os.replace(tmp, path)
+    text = _io.StringIO()
+    YAML().dump(doc, text)  # round-trip dumper: comments and layout kept
+    atomic_write(path, text.getvalue())
 
 
 def _one_line(exc: BaseException) -> str:

@@ -42,7 +42,6 @@ fatal; a cache folder that cannot be written only costs a warning.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import logging
 import math
@@ -50,7 +49,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import BinaryIO, Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -258,13 +257,14 @@ def _read_cache(path: Path, key: dict, fs: float) -> NoiseBank:
 
 
 def _write_cache(path: Path, bank: NoiseBank) -> None:
-    from vibsynth.io import atomic_write_bytes
+    """Write the cache file through :func:`vibsynth.io.atomic_write`, streamed (no in-memory copy)."""
+    from vibsynth.io import atomic_write
 
-    buffer = io.BytesIO()
-    np.savez(
-        buffer, signals=bank.signals, balances=bank.balances, peaks=bank.peaks, key=np.array(json.dumps(bank.key))
-    )
-    atomic_write_bytes(path, buffer.getvalue())
+    def write(handle: BinaryIO) -> None:
+        np.savez(handle, signals=bank.signals, balances=bank.balances, peaks=bank.peaks,
+                 key=np.array(json.dumps(bank.key)))
+
+    atomic_write(path, write)
 
 
 def load_or_build(
