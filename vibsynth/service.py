@@ -7,6 +7,11 @@ Flow (one direction, each layer knows only the one below)::
 
 :func:`build_engine` and :func:`open_output` are usable on their own (tests,
 benchmarks); :func:`serve` runs until Ctrl-C/SIGTERM or ``--seconds``.
+
+A lost audio device does not stop the service: the output's supervisor retries it
+with back-off while OSC/MIDI keep working, and ``/status``, the console status line
+and the log say ``device lost`` with the reason. SIGTERM/SIGINT exit with code 0
+within :data:`EXIT_DEADLINE_S` in every state (see :class:`~vibsynth.engine.supervisor.ExitGuard`).
 """
 from __future__ import annotations
 
@@ -25,11 +30,16 @@ from vibsynth.engine.bank import BankSpec, load_or_build
 from vibsynth.engine.commands import SetMute
 from vibsynth.engine.engine import Engine
 from vibsynth.engine.outputs import NullOutput, OutputBackend, SoundDeviceOutput, WavOutput
+from vibsynth.engine.supervisor import STREAMING, ExitGuard, hard_exit
 from vibsynth.errors import ConfigError, DeviceError, ParameterError, VibsynthError
 
 __all__ = ["build_engine", "open_output", "serve", "actuator_from_config", "status_line"]
 
 log = logging.getLogger(__name__)
+
+#: After SIGTERM/SIGINT, a process run by the CLI exits (code 0) after at most this long,
+#: even if closing a device hangs.
+EXIT_DEADLINE_S = 1.5
 
 
 def _get(config: Any, section: str, key: str, default: Any = None) -> Any:
@@ -149,9 +159,16 @@ def open_output(
     return output
 
 
+def output_state(output: OutputBackend) -> str:
+    """``device lost: JACK server shut down`` (state and reason), or just the state."""
+    state, reason = getattr(output, "state", STREAMING), getattr(output, "state_reason", "")
+    return f"{state}: {reason}" if reason else str(state)
+
+
 def status_line(engine: Engine, output: OutputBackend) -> str:
-    """One line: knobs per channel, underflows, render load."""
-    chans = []
+    """One line: output state when not streaming, knobs per channel, underflows, render load."""
+    state = output_state(output)
+    chans = [] if state == STREAMING else [state]
     for c, (k, b, muted) in enumerate(engine.knob_values()):
         chans.append(f"ch{c + 1} I={k:.2f} B={b:+.2f}{' (muted)' if muted else ''}")
     peak = engine.stats.take_peak()
@@ -173,12 +190,40 @@ def _load_presets(config: Any) -> tuple[Any, Any]:
         return None, None
 
 
-def serve(config: Any, args: Any) -> int:
+def serve(config: Any, args: Any, *, owns_process: bool = False) -> int:
     """Run the service until Ctrl-C/SIGTERM (or ``args.seconds``). Returns the exit code.
 
     ``args`` attributes used: ``preset``, ``balance``, ``intensity``, ``device``,
     ``output``, ``seconds``, ``wav`` (plus the adapters' own flags).
+
+    Parameters
+    ----------
+    owns_process : bool
+        True when the service is the process (the CLI): a signal then arms an
+        :class:`ExitGuard` (``os._exit(0)`` after :data:`EXIT_DEADLINE_S` if clean-up
+        hangs) and PortAudio is shut down at the end without risking a hang in
+        sounddevice's exit hook. Library callers and tests leave it False.
     """
+    stop = threading.Event()
+    guard = ExitGuard(EXIT_DEADLINE_S) if owns_process else None
+    previous: dict[int, Any] = {}
+
+    def on_signal(signum: int, frame: Any) -> None:  # no logging or locks here
+        stop.set()
+        if guard is not None:
+            guard.arm()
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            previous[sig] = signal.signal(sig, on_signal)
+    try:
+        return _serve(config, args, stop, owns_process)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) -> int:
     err = sys.stderr
     knobs = config.data["knobs"]
     limits = KnobLimits(balance_min=float(knobs["balance_min"]), balance_max=float(knobs["balance_max"]))
@@ -200,6 +245,8 @@ def serve(config: Any, args: Any) -> int:
     if err.isatty():
         print("\r\x1b[K", end="", file=err)
     log.info("engine ready in %.2f s", time.perf_counter() - started)
+    if stop.is_set():
+        return 0
 
     library, watcher_cls = _load_presets(config)
     controller = Controller(
@@ -220,15 +267,12 @@ def serve(config: Any, args: Any) -> int:
                     or config.data["audio"].get("device") is not None)
     output = open_output(config, engine, explicit, wav_path=getattr(args, "wav", None),
                          seconds=getattr(args, "seconds", None))
+    # The control adapters' /status reads output.state / output.state_reason through this.
+    controller.output = output  # type: ignore[attr-defined]
 
     servers: list[Any] = []
     watcher = None
-    stop = threading.Event()
-    previous: dict[int, Any] = {}
-
-    def on_signal(signum: int, frame: Any) -> None:
-        stop.set()
-
+    portaudio_clean = True
     try:
         for module in adapter_modules():
             server = module.create(config, args, controller, library)
@@ -238,10 +282,8 @@ def serve(config: Any, args: Any) -> int:
         if library is not None and watcher_cls is not None and config.data.get("presets", {}).get("watch", True):
             watcher = watcher_cls(library, on_change=lambda name: controller.reapply_preset(name), interval_s=0.5)
             watcher.start()
-        output.start()
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGTERM, signal.SIGINT):
-                previous[sig] = signal.signal(sig, on_signal)
+        if not stop.is_set():
+            output.start()
 
         out = sys.stdout
         print(f"vibsynth: serving {engine.channels} channel(s) on {output.describe()}", file=out)
@@ -269,8 +311,6 @@ def serve(config: Any, args: Any) -> int:
         if tty:
             print(file=out)
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
         for server in servers:
             try:
                 server.stop()
@@ -283,5 +323,12 @@ def serve(config: Any, args: Any) -> int:
             engine.submit(SetMute(True))
             time.sleep(engine.mute_fade_s + 4 * 1024 / engine.fs)
         output.stop()
+        if owns_process and isinstance(output, SoundDeviceOutput):
+            portaudio_clean = output.shutdown_portaudio()
     log.info("stopped; %d underflow(s)", output.stats.underflows)
+    if not portaudio_clean:
+        # After a device loss PortAudio/libjack cannot be shut down (their exit-time
+        # clean-up would hang or crash): end the process here, code 0.
+        log.info("exiting without PortAudio's exit hooks (a device was lost during the run)")
+        hard_exit(0)
     return 0

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import threading
 import time
 import types
 
@@ -155,9 +156,10 @@ def _has_osc() -> bool:
 
 
 class _FakeStream:
-    """A PortAudio stream stand-in whose device can "fail" (stream stops by itself)."""
+    """A PortAudio stream stand-in: while active, a thread calls the engine's callback every 5 ms."""
 
     opened: list["_FakeStream"] = []
+    engine: Engine | None = None
 
     def __init__(self, kind="output", *, callback, finished_callback, userdata=None, **kwargs):
         self.callback, self.userdata, self.finished_callback, self.kwargs = callback, userdata, finished_callback, kwargs
@@ -165,8 +167,15 @@ class _FakeStream:
         self.closed = False
         _FakeStream.opened.append(self)
 
+    def _run(self):
+        buf = np.zeros((64, 1), dtype=np.float32)
+        while self.active:
+            _FakeStream.engine._core.run_callback(buf, 0)
+            time.sleep(0.005)
+
     def start(self):
         self.active = True
+        threading.Thread(target=self._run, daemon=True).start()
 
     def stop(self):
         self.active = False
@@ -183,28 +192,46 @@ class _FakeStream:
         self.finished_callback()
 
 
-def test_watchdog_restarts_the_stream_after_a_device_error(small_bank, monkeypatch):
-    import time
+def _fake_portaudio(sd):
+    """The PortAudio calls of a re-scan (Pa_Terminate + Pa_Initialize) on a fake sounddevice."""
+    sd._lib = types.SimpleNamespace(Pa_Initialize=lambda: 0, Pa_Terminate=lambda: 0)
+    sd._initialized = 1
+    sd._check = lambda code, msg="": code
 
+    def terminate():
+        sd._initialized -= 1
+    sd._terminate = terminate
+
+
+def test_supervisor_restarts_the_stream_after_a_device_error(small_bank, monkeypatch):
     _FakeStream.opened = []
     sd = fake_sd(DEVICES, APIS, default_out=1)
     sd._StreamBase = _FakeStream
     sd._ffi = types.SimpleNamespace(cast=lambda ctype, value: value)
+    _fake_portaudio(sd)
     monkeypatch.setattr(outputs, "import_sounddevice", lambda: sd)
     out = SoundDeviceOutput(Engine(small_bank, channels=1), block_size=64)
+    _FakeStream.engine = out.engine
     out.start()
     try:
         first = _FakeStream.opened[0]
-        assert out.is_running()
-        first.device_error()
         deadline = time.monotonic() + 5.0
-        while out.stats.restarts == 0 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert out.stats.restarts == 1
+        while out.state != "streaming" and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert out.is_running() and out.state == "streaming"
+        first.device_error()
+        while out.state != "device lost" and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert out.state_reason == "stream stopped"
+        while out.state != "streaming" and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert out.state == "streaming" and out.stats.restarts == 1
+        assert out.supervisor.recovered_after_s < 1.0  # first retry after 0.25 s
         assert first.closed and len(_FakeStream.opened) == 2
         assert out.is_running() and _FakeStream.opened[1].active
         # the new stream runs the same engine's compiled callback
         assert (_FakeStream.opened[1].callback, _FakeStream.opened[1].userdata) == out.engine.callback_addresses()
     finally:
         out.stop()
-    assert not _FakeStream.opened[1].active
+    assert not _FakeStream.opened[1].active and _FakeStream.opened[1].closed
+    assert out.state == "stopped"

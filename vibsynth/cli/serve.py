@@ -78,4 +78,5 @@ def _config(args: argparse.Namespace) -> Any:
 def run(args: argparse.Namespace) -> int:
     from vibsynth.service import serve
 
-    return serve(_config(args), args)
+    # The CLI owns the process: SIGTERM/SIGINT exit (code 0) on time even if a device hangs.
+    return serve(_config(args), args, owns_process=True)

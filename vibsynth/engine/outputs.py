@@ -11,9 +11,10 @@ A small interface (like mido's ports) so tests and the service swap them freely:
   userdata=...)`` hook (the one ``rtmixer`` uses): it renders straight into
   PortAudio's interleaved buffer with the channel map, never calls into Python (no
   GIL), allocates nothing, takes no lock, never logs and always fills the whole
-  buffer. Underflows are counted in C from the callback's status flags. A watchdog
-  thread restarts the stream (with back-off) when the device errors or the stream
-  stops by itself.
+  buffer. Underflows are counted in C from the callback's status flags. A
+  supervisor thread (:mod:`vibsynth.engine.supervisor`) detects a lost device (stream
+  stopped, JACK server gone, no heartbeat) and reopens it with back-off; ``state`` and
+  ``state_reason`` say what is going on.
 * :class:`NullOutput`: paced by ``time.monotonic`` in its own thread, for machines
   without a sound card (the engine keeps its timing, controls keep working).
 * :class:`WavOutput`: renders a fixed duration as fast as possible into a WAV file.
@@ -25,17 +26,25 @@ without PortAudio can still use the other backends; its ``OSError`` becomes a
 from __future__ import annotations
 
 import logging
-import sys
 import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from vibsynth.engine.engine import Engine
+from vibsynth.engine.pa_runtime import PortAudioRuntime
+from vibsynth.engine.supervisor import (
+    HEARTBEAT_TIMEOUT_S,
+    STOPPED,
+    STREAMING,
+    Backoff,
+    HungCallError,
+    StreamSupervisor,
+)
 from vibsynth.errors import DeviceError, ParameterError
 
 __all__ = [
@@ -112,6 +121,16 @@ class OutputBackend:
     def describe(self) -> str:
         """One line for the start-up banner."""
         return self.name
+
+    @property
+    def state(self) -> str:
+        """``streaming`` or ``stopped`` (a device output adds ``device lost`` and others)."""
+        return STREAMING if self.is_running() else STOPPED
+
+    @property
+    def state_reason(self) -> str:
+        """Why the output is not streaming ("" when it is)."""
+        return ""
 
     def _count_underflow(self) -> None:
         self.stats.underflows += 1
@@ -198,7 +217,15 @@ def list_devices() -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
 
 
 class SoundDeviceOutput(OutputBackend):
-    """PortAudio callback stream.
+    """PortAudio callback stream, supervised: a lost device is retried until it comes back.
+
+    Streams are created in one place, :meth:`_open_stream`. A
+    :class:`~vibsynth.engine.supervisor.StreamSupervisor` thread watches the engine's
+    heartbeat (``engine.stats.blocks``, advanced by the compiled callback) and the
+    stream's health; after a loss it drops the stream, re-scans PortAudio
+    (:class:`~vibsynth.engine.pa_runtime.PortAudioRuntime`) and reopens with back-off.
+    The engine object is kept, so the knobs are unchanged. Every PortAudio call that
+    may block is bounded in time and abandoned if it hangs.
 
     Parameters
     ----------
@@ -212,7 +239,22 @@ class SoundDeviceOutput(OutputBackend):
     channel_map : sequence of int, optional
         1-based device output for each engine channel; None = 1..channels.
     restart : bool
-        Reopen the stream when it errors or stops by itself.
+        Run the supervisor thread (reopen after a loss). False: call
+        ``supervisor.step()`` yourself (tests).
+    heartbeat_timeout_s : float
+        No new block for this long while streaming = device lost.
+    backoff : Backoff, optional
+        Retry delays (default 0.25 s doubling to 2 s).
+    clock : callable
+        Monotonic clock of the supervisor.
+
+    Attributes
+    ----------
+    state : str
+        ``starting``, ``streaming``, ``device lost``, ``recovering`` or ``stopped``.
+    state_reason : str
+        Why the device was lost ("JACK server shut down", "stream stopped",
+        "no heartbeat for 0.5 s"); empty while streaming.
     """
 
     name = "sounddevice"
@@ -227,6 +269,9 @@ class SoundDeviceOutput(OutputBackend):
         latency: str | float = "low",
         channel_map: Sequence[int] | None = None,
         restart: bool = True,
+        heartbeat_timeout_s: float = HEARTBEAT_TIMEOUT_S,
+        backoff: Backoff | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         super().__init__(engine)
         self.device = device
@@ -243,25 +288,35 @@ class SoundDeviceOutput(OutputBackend):
         self.stats = CallbackStats(engine)  # type: ignore[assignment]
         self.restart = restart
         self._sd: ModuleType | None = None
+        self._runtime: PortAudioRuntime | None = None
         self._stream: Any = None
         self._device_index: int | None = None
+        self._on_jack = False
         self._want_running = False
         self._failed = False
-        self._watchdog: threading.Thread | None = None
-        self._stop_event = threading.Event()
+        self._started = False  # the current stream was started (so inactive = it stopped by itself)
+        self._closing = False
+        self._lock = threading.Lock()
+        self._reported_errors = 0
         self.last_error: BaseException | None = None
+        self.supervisor = StreamSupervisor(self, heartbeat_timeout_s=heartbeat_timeout_s, backoff=backoff,
+                                           clock=clock)
 
     def _finished(self) -> None:
         if self._want_running:
             self._failed = True
 
-    # -- life cycle ---------------------------------------------------------------
-    def open(self) -> None:
-        """Open (not start) the stream: after this the device ports exist (JACK tests connect here)."""
-        if self._stream is not None:
-            return
-        sd = self._sd or import_sounddevice()
-        self._sd = sd
+    # -- stream creation ---------------------------------------------------------------
+    def _create_stream(self) -> Any:
+        """Resolve the device and open (not start) a stream on it; runs with a time limit.
+
+        Raises
+        ------
+        DeviceError
+            No such device, too few outputs, or PortAudio refused the settings.
+        """
+        sd = self._sd
+        assert sd is not None
         index = resolve_device(sd, self.device, self.host_api)
         info = sd.query_devices(index)
         if info["max_output_channels"] < self.device_channels:
@@ -270,11 +325,11 @@ class SoundDeviceOutput(OutputBackend):
                 f"the channel map needs {self.device_channels}"
             )
         try:
-            self._stream = self._open_stream(sd, index)
+            stream = self._open_stream(sd, index)
         except Exception as exc:  # sd.PortAudioError, ValueError for bad settings
             raise DeviceError(f"cannot open {info['name']!r} at {self.engine.fs:g} Hz: {exc}") from None
         self._device_index = index
-        self._failed = False
+        return stream
 
     def _open_stream(self, sd: ModuleType, index: int) -> Any:
         """A PortAudio output stream whose callback is the engine's compiled one (no GIL)."""
@@ -287,76 +342,177 @@ class SoundDeviceOutput(OutputBackend):
             finished_callback=self._finished,
         )
 
+    def _portaudio(self) -> PortAudioRuntime:
+        if self._sd is None:
+            self._sd = import_sounddevice()
+        if self._runtime is None:
+            self._runtime = PortAudioRuntime(self._sd)
+        return self._runtime
+
+    def _new_stream(self) -> Any:
+        """:meth:`_create_stream` with a time limit; notes whether the device is on JACK."""
+        stream = self._portaudio().call(self._create_stream, "opening the audio device")
+        self._on_jack = "jack" in self._host_api_name().lower()
+        return stream
+
+    def _host_api_name(self) -> str:
+        try:
+            sd = self._sd
+            return str(sd.query_hostapis(sd.query_devices(self._device_index)["hostapi"])["name"])
+        except Exception:  # noqa: BLE001 - informative only
+            return ""
+
+    # -- life cycle ---------------------------------------------------------------
+    def open(self) -> None:
+        """Open (not start) the stream: after this the device ports exist (JACK tests connect here)."""
+        if self._stream is not None:
+            return
+        stream = self._new_stream()
+        with self._lock:
+            self._stream, self._failed, self._started = stream, False, False
+
     def start(self) -> None:
         self.open()
-        self._want_running = True
+        self._want_running, self._closing = True, False
         try:
-            self._stream.start()
+            self._portaudio().call(self._stream.start, "starting the audio stream")
         except Exception as exc:
             raise DeviceError(f"cannot start the audio stream: {exc}") from None
-        if self.restart and self._watchdog is None:
-            self._stop_event.clear()
-            self._watchdog = threading.Thread(target=self._watch, name="vibsynth-audio-watchdog", daemon=True)
-            self._watchdog.start()
-
-    def _close(self) -> None:
-        stream, self._stream = self._stream, None
-        if stream is not None:
-            try:
-                stream.abort() if self._failed else stream.stop()
-            except Exception:
-                pass
-            try:
-                stream.close()
-            except Exception:
-                pass
+        self._started = True
+        self.supervisor.begin()
+        if self.restart:
+            self.supervisor.start_thread()
 
     def stop(self) -> None:
+        """Stop supervising, then stop and close the stream; returns within about 1.3 s whatever happens."""
         self._want_running = False
-        self._stop_event.set()
-        if self._watchdog is not None:
-            self._watchdog.join(timeout=5)
-            self._watchdog = None
-        self._close()
+        with self._lock:
+            self._closing = True
+            stream, self._stream = self._stream, None
+        self.supervisor.stop()
+        if stream is not None and self._runtime is not None:
+            fault = self._fault_of(stream) if self._started else None
+            dead = self._on_jack and fault is not None
+            if not self._runtime.close(stream, dead=dead, graceful=fault is None) and self._on_jack:
+                self._runtime.mark_dirty("its JACK stream did not close")
+
+    def shutdown_portaudio(self) -> bool:
+        """At process exit, after :meth:`stop`: terminate PortAudio if that is safe.
+
+        Returns False when PortAudio could not be terminated cleanly (after a device
+        loss, or a hung call): the process should then end with
+        :func:`~vibsynth.engine.supervisor.hard_exit`. See :meth:`PortAudioRuntime.shutdown`.
+        """
+        return True if self._runtime is None else self._runtime.shutdown()
 
     def is_running(self) -> bool:
-        return self._stream is not None and bool(self._stream.active)
+        stream = self._stream
+        try:
+            return stream is not None and bool(stream.active)
+        except Exception:  # noqa: BLE001 - a PortAudio error: not running
+            return False
 
-    def _watch(self) -> None:
-        backoff = 0.5
-        reported_errors = 0
-        while not self._stop_event.wait(0.25):
-            if self.stats.errors != reported_errors:
-                reported_errors = self.stats.errors
-                log.error("audio callback error (block filled with silence): %r", self.last_error)
-            stream = self._stream
-            if not self._want_running or (stream is not None and not self._failed and stream.active):
-                backoff = 0.5
-                continue
-            log.warning("audio stream stopped unexpectedly; restarting in %.1f s", backoff)
-            if self._stop_event.wait(backoff):
-                return
-            self._close()
-            try:
-                self.open()
-                self._stream.start()
-                self.stats.restarts += 1
-                self.engine.stats.output_errors += 1
-                log.warning("audio stream restarted on device %s", self._device_index)
-            except Exception as exc:
-                self._failed = True
-                log.warning("audio restart failed: %s", exc)
-                backoff = min(backoff * 2, 10.0)
+    @property
+    def state(self) -> str:
+        return self.supervisor.state
+
+    @property
+    def state_reason(self) -> str:
+        return self.supervisor.reason
+
+    # -- what the supervisor calls (SupervisedStream) -------------------------------
+    def heartbeat(self) -> int:
+        return int(self.engine.stats.blocks)
+
+    def _fault_of(self, stream: Any) -> str | None:
+        if stream is None:
+            return "no stream"
+        try:
+            active = bool(stream.active) and not self._failed
+        except Exception as exc:  # noqa: BLE001 - sd.PortAudioError
+            return f"PortAudio error: {exc}"
+        if active:
+            return None
+        # PortAudio's JACK host API marks its streams inactive when the server goes away
+        # (it calls no finished callback); elsewhere the stream ends by itself.
+        return "JACK server shut down" if self._on_jack else "stream stopped"
+
+    def stream_fault(self) -> str | None:
+        return self._fault_of(self._stream)
+
+    def drop_stream(self) -> None:
+        with self._lock:
+            stream, self._stream = self._stream, None
+        if stream is None or self._runtime is None:
+            return
+        # A JACK stream that went inactive by itself: its server is gone and any call on it
+        # would wait 10 min (then abort the process); never call it again.
+        dead = self._on_jack and self._started and self._fault_of(stream) is not None
+        self._runtime.close(stream, dead=dead)
+        if self._on_jack:
+            self._runtime.mark_dirty("its JACK stream was lost")
+
+    def reopen(self) -> str:
+        runtime = self._portaudio()
+        if self._closing:
+            raise DeviceError("the output is closing")
+        runtime.reinitialize()
+        try:
+            stream = self._new_stream()
+        except HungCallError:
+            raise
+        except DeviceError:
+            self._settle()
+            raise
+        with self._lock:
+            closing = self._closing
+            if not closing:
+                self._stream, self._failed, self._started = stream, False, False
+        if closing:
+            runtime.close(stream, dead=False)
+            raise DeviceError("the output is closing")
+        try:
+            runtime.call(stream.start, "starting the audio stream")
+        except HungCallError:
+            with self._lock:
+                if self._stream is stream:
+                    self._stream = None
+            runtime.abandon(stream, "starting a stream hung")
+            raise
+        except Exception as exc:
+            self.drop_stream()
+            self._settle()
+            raise DeviceError(f"cannot start the audio stream: {exc}") from None
+        self._started = True
+        self.stats.restarts += 1
+        self.engine.stats.output_errors += 1
+        return self._device_label()
+
+    def _settle(self) -> None:
+        """After a failed attempt: terminate PortAudio now, while its servers were just seen alive."""
+        try:
+            self._runtime.terminate()  # type: ignore[union-attr]
+        except DeviceError as exc:
+            log.info("terminating PortAudio after a failed retry: %s", exc)
+
+    def housekeeping(self) -> None:
+        errors = self.stats.errors
+        if errors != self._reported_errors:
+            self._reported_errors = errors
+            log.error("audio callback error (block filled with silence): %r", self.last_error)
+
+    # -- description ------------------------------------------------------------------
+    def _device_label(self) -> str:
+        try:
+            info = self._sd.query_devices(self._device_index)  # type: ignore[union-attr]
+            return f"{info['name']} ({self._host_api_name()})"
+        except Exception:  # noqa: BLE001 - informative only
+            return "?"
 
     def describe(self) -> str:
-        name = "?"
-        if self._sd is not None and self._device_index is not None:
-            info = self._sd.query_devices(self._device_index)
-            api = self._sd.query_hostapis(info["hostapi"])["name"]
-            name = f"{info['name']} ({api})"
         latency = getattr(self._stream, "latency", None)
         lat = f", latency {1000 * latency:.1f} ms" if isinstance(latency, float) else ""
-        return (f"sounddevice: {name}, {self.engine.fs:g} Hz, block {self.block_size}{lat}, "
+        return (f"sounddevice: {self._device_label()}, {self.engine.fs:g} Hz, block {self.block_size}{lat}, "
                 f"outputs {[c + 1 for c in self.channel_map]}")
 
 

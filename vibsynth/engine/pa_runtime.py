@@ -1,0 +1,287 @@
+"""PortAudio's life cycle around device loss: re-scan, abandon, shut down without hanging.
+
+PortAudio sees new devices (a restarted JACK server) only after ``Pa_Terminate`` +
+``Pa_Initialize``. After a JACK server died under it, that is not possible in the same
+library instance (measured with PortAudio 19.6/19.7 and jack2 1.9.21):
+
+* ``Pa_AbortStream``/``Pa_StopStream``/``Pa_CloseStream`` on the dead stream wait 10 min
+  for a JACK process thread that will never run again;
+* ``Pa_Terminate`` asserts on ``jack_deactivate``: the whole process aborts (SIGABRT).
+
+So :class:`PortAudioRuntime` keeps a *dirty* flag. A clean instance is re-scanned with
+``Pa_Terminate`` + ``Pa_Initialize``. A dirty one (its JACK server died, or a stream or a
+call had to be abandoned) is never called again: a fresh copy of the PortAudio shared
+library is loaded (its own globals) and sounddevice is pointed at it. The old one stays
+loaded for good (unloading it makes libjack call into freed code) and costs a few hundred
+KB per device loss. At exit a dirty instance is not terminated either: sounddevice's
+``atexit`` hook is disarmed instead.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import tempfile
+import threading
+from pathlib import Path
+from types import ModuleType
+from typing import Any, Callable
+
+from vibsynth.engine.supervisor import HungCallError, call_with_timeout
+from vibsynth.errors import DeviceError
+
+__all__ = ["PortAudioRuntime", "load_library_copy", "CALL_TIMEOUT_S"]
+
+log = logging.getLogger(__name__)
+
+#: Time limit of one PortAudio call (open, start, initialise) before it is abandoned.
+CALL_TIMEOUT_S = 2.0
+#: Time limit of stopping/closing a stream before it is abandoned.
+CLOSE_TIMEOUT_S = 1.0
+
+#: Library instances and streams that must never be freed (PortAudio/JACK may still call into them).
+_KEEP_ALIVE: list[Any] = []
+
+
+def _loaded_library_path(sd: ModuleType) -> str:
+    """The file of the PortAudio library sounddevice loaded first (Linux: from /proc/self/maps)."""
+    name = str(getattr(sd, "_libname", ""))
+    if os.path.isabs(name) and os.path.exists(name):
+        return name
+    try:
+        with open("/proc/self/maps", encoding="utf-8", errors="replace") as maps:
+            for line in maps:
+                path = line.rstrip("\n").split(" ")[-1]
+                base = os.path.basename(path)
+                if base.startswith("libportaudio") and ".so" in base and os.path.exists(path):
+                    return path
+    except OSError:
+        pass
+    raise DeviceError("cannot find the PortAudio library file to load a fresh copy (needs Linux /proc)")
+
+
+def load_library_copy(sd: ModuleType) -> Any:
+    """Load a private copy of the PortAudio library (fresh global state) with sounddevice's FFI.
+
+    The copy is unlinked right after loading (the mapping stays valid).
+
+    Raises
+    ------
+    DeviceError
+        No usable copy could be made or loaded (no writable, executable directory).
+    """
+    source = _loaded_library_path(sd)
+    places = [tempfile.gettempdir(), os.environ.get("XDG_RUNTIME_DIR", ""),
+              str(Path.home() / ".cache" / "vibsynth"), "/dev/shm"]
+    errors = []
+    for place in filter(None, places):
+        try:
+            os.makedirs(place, exist_ok=True)
+            fd, copy = tempfile.mkstemp(prefix="vibsynth-portaudio-", suffix=".so", dir=place)
+            os.close(fd)
+        except OSError as exc:
+            errors.append(f"{place}: {exc.strerror or exc}")
+            continue
+        try:
+            shutil.copyfile(source, copy)
+            return sd._ffi.dlopen(copy)
+        except (OSError, ImportError) as exc:  # cffi raises OSError when dlopen fails (e.g. noexec)
+            errors.append(f"{place}: {exc}")
+        finally:
+            try:
+                os.unlink(copy)
+            except OSError:
+                pass
+    raise DeviceError(f"cannot load a fresh copy of {source}: {'; '.join(errors)}")
+
+
+class _StderrMute:
+    """Send fd 2 to /dev/null around ``Pa_Initialize`` (ALSA/JACK scan noise); restorable from another thread."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._saved: int | None = None
+
+    def mute(self) -> None:
+        with self._lock:
+            if self._saved is not None:
+                return
+            try:
+                saved = os.dup(2)
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, 2)
+                os.close(devnull)
+            except OSError:
+                return
+            self._saved = saved
+
+    def restore(self) -> None:
+        with self._lock:
+            saved, self._saved = self._saved, None
+            if saved is not None:
+                os.dup2(saved, 2)
+                os.close(saved)
+
+
+class PortAudioRuntime:
+    """One sounddevice module's PortAudio instance, re-scannable after device loss.
+
+    Parameters
+    ----------
+    sd : module
+        python-sounddevice (or a test double with ``_lib``, ``_initialized``,
+        ``_terminate``, ``_check``, ``_ffi`` and ``query_hostapis``).
+    fresh_library : callable, optional
+        ``fresh_library(sd) -> lib`` loads a new library instance (default
+        :func:`load_library_copy`).
+    call_timeout_s, close_timeout_s : float
+
+    Attributes
+    ----------
+    dirty : str
+        Why this instance must never be terminated or re-used ("" = clean).
+    generation : int
+        Library instances loaded so far (0 = the one sounddevice loaded).
+    """
+
+    def __init__(
+        self,
+        sd: ModuleType,
+        *,
+        fresh_library: Callable[[ModuleType], Any] | None = None,
+        call_timeout_s: float = CALL_TIMEOUT_S,
+        close_timeout_s: float = CLOSE_TIMEOUT_S,
+    ) -> None:
+        self.sd = sd
+        self.fresh_library = fresh_library or load_library_copy
+        self.call_timeout_s = float(call_timeout_s)
+        self.close_timeout_s = float(close_timeout_s)
+        self.dirty = ""
+        self.generation = 0
+        self._stderr = _StderrMute()
+
+    # -- bounded calls ---------------------------------------------------------------
+    def call(self, fn: Callable[[], Any], what: str, timeout_s: float | None = None) -> Any:
+        """:func:`call_with_timeout`; a hung call makes the instance dirty."""
+        try:
+            return call_with_timeout(fn, self.call_timeout_s if timeout_s is None else timeout_s, what)
+        except HungCallError:
+            self.mark_dirty(f"{what} hung")
+            raise
+
+    def mark_dirty(self, why: str) -> None:
+        """Never call this library instance again (its next re-scan loads a fresh copy)."""
+        if not self.dirty:
+            self.dirty = why
+            log.info("PortAudio instance %d retired: %s", self.generation, why)
+
+    def has_jack(self) -> bool:
+        """Whether this instance talks to a JACK server."""
+        try:
+            return any("jack" in str(api["name"]).lower() for api in self.sd.query_hostapis())
+        except Exception:  # noqa: BLE001 - not initialised: no JACK client either
+            return False
+
+    # -- re-scan ----------------------------------------------------------------------
+    def reinitialize(self) -> None:
+        """Make PortAudio re-scan the devices (terminate + initialise, or a fresh library copy).
+
+        Raises
+        ------
+        DeviceError
+            PortAudio could not be initialised (or a call hung: :class:`HungCallError`).
+        """
+        sd = self.sd
+        if self.dirty:
+            lib = self.call(lambda: self.fresh_library(sd), "loading a fresh PortAudio library")
+            _KEEP_ALIVE.append(sd._lib)
+            sd._lib, sd._initialized = lib, 0
+            self.generation += 1
+            self.dirty = ""
+            log.info("PortAudio instance %d loaded", self.generation)
+        else:
+            self.terminate()
+        try:
+            self.call(self._initialize, "initialising PortAudio")
+        except HungCallError:
+            self._stderr.restore()  # the abandoned call left fd 2 on /dev/null
+            raise
+
+    def _initialize(self) -> None:
+        sd = self.sd
+        self._stderr.mute()
+        try:
+            code = sd._lib.Pa_Initialize()
+        finally:
+            self._stderr.restore()
+        try:
+            sd._check(code, "Error initializing PortAudio")
+        except Exception as exc:
+            raise DeviceError(str(exc)) from None
+        sd._initialized += 1
+
+    def terminate(self) -> None:
+        """``Pa_Terminate`` until uninitialised, unless dirty (then nothing: it could abort the process)."""
+        sd = self.sd
+        if self.dirty:
+            return
+        while getattr(sd, "_initialized", 0) > 0:
+            try:
+                self.call(sd._terminate, "terminating PortAudio")
+            except HungCallError:
+                raise
+            except Exception as exc:  # a PortAudioError: count it as terminated, do not loop
+                sd._initialized = max(0, sd._initialized - 1)
+                log.info("Pa_Terminate: %s", exc)
+
+    # -- streams -----------------------------------------------------------------------
+    def abandon(self, stream: Any, why: str) -> None:
+        """Keep ``stream`` alive for good without calling it again; the instance becomes dirty."""
+        _KEEP_ALIVE.append(stream)
+        self.mark_dirty(why)
+
+    def close(self, stream: Any, *, dead: bool, graceful: bool = False) -> bool:
+        """Stop and close ``stream`` in bounded time. Returns True if it was closed.
+
+        Parameters
+        ----------
+        dead : bool
+            Its JACK server is gone: do not call PortAudio on it at all (abandon it).
+        graceful : bool
+            ``stop()`` (play out queued buffers) instead of ``abort()``.
+        """
+        if dead:
+            self.abandon(stream, "its JACK server died under an open stream")
+            return False
+        generation = self.generation
+
+        def shut() -> None:
+            (stream.stop if graceful else stream.abort)()
+            if self.generation == generation:  # never call a retired library through its stream
+                stream.close()
+
+        try:
+            self.call(shut, "closing the audio stream", self.close_timeout_s)
+        except HungCallError:
+            _KEEP_ALIVE.append(stream)
+            return False
+        except Exception as exc:  # noqa: BLE001 - a PortAudioError on close: the stream is gone anyway
+            log.info("closing the audio stream: %s", exc)
+        return True
+
+    def shutdown(self) -> bool:
+        """At process exit: terminate PortAudio if that is safe, else disarm sounddevice's exit hook.
+
+        Returns True if PortAudio was terminated cleanly. False: it was dirty or
+        ``Pa_Terminate`` hung; the process should then end with ``os._exit`` (libjack's
+        exit-time destructors crash with a client whose server died).
+        """
+        if self.dirty:
+            self.sd._initialized = 0  # its atexit handler would call Pa_Terminate: abort or hang
+            return False
+        try:
+            self.terminate()
+        except HungCallError:
+            self.sd._initialized = 0
+            return False
+        return not _KEEP_ALIVE  # retired instances/streams: libjack may still hold their clients
