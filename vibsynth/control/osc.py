@@ -713,6 +713,12 @@ class OscHandler:
             ("errors", int(sum(ctl.error_counts.values()))),
             ("subscribers", len(self.notifier) if self.notifier is not None else 0),
         ]
+        # The audio output (set by the service as controller.output): "streaming", or
+        # "device lost" with the reason while it is retried.
+        output = getattr(ctl, "output", None)
+        if output is not None:
+            pairs += [("output", str(getattr(output, "state", ""))),
+                      ("output_reason", str(getattr(output, "state_reason", "")))]
         if self.extra_status is not None:
             pairs.extend(self.extra_status())
         pairs += [("replies_truncated", self.stats.replies_truncated), ("replies_dropped", self.stats.replies_dropped)]
