@@ -136,7 +136,7 @@ def test_save_is_atomic_and_never_writes_invalid(tmp_path, monkeypatch):
         raise OSError("disk full")
 
     monkeypatch.setattr(vio.os, "replace", crash)
-    with pytest.raises(OSError):
+    with pytest.raises(PresetError, match=r"a.yaml: cannot write \(disk full\)"):
         save_preset(Preset("a", 0.9, 0.0), path)
     assert path.read_text() == before  # the old file is intact
     assert [p.name for p in tmp_path.iterdir()] == ["a.yaml"]  # no temp file left
@@ -278,19 +278,31 @@ def test_watcher_edit_break_fix_delete(dirs, caplog):
         assert lib.names() == ["alpha", "beta", "extra", "gamma"]  # nothing else lost
 
 
-def test_same_size_same_mtime_edit_is_seen_by_hash(dirs):
+def test_same_size_same_mtime_edit_is_seen_by_the_one_racy_reread(dirs, monkeypatch):
+    """An in-place edit of the same size within the timestamp resolution leaves (mtime, size,
+    inode) unchanged: a file read within RACY_NS of its mtime is read once more after that."""
+    import vibsynth.presets as vp
+
     shipped, user = dirs
     user.mkdir()
     target = user / "m.yaml"
     target.write_text("intensity: 0.25\nbalance: 0\n")
     stat = target.stat()
-    lib = PresetLibrary(shipped, user)
+    lib = PresetLibrary(shipped, user, load=False)
+    lib._clock = lambda: stat.st_mtime_ns + 1_000_000  # read 1 ms after the write: racy
+    lib.reload()
     rec = Recorder()
     watcher = PresetWatcher(lib, rec)
+    assert watcher.poll() == {}
     target.write_text("intensity: 0.75\nbalance: 0\n")
     os.utime(target, ns=(stat.st_atime_ns, stat.st_mtime_ns))
-    assert target.stat().st_size == stat.st_size
-    assert watcher.poll() == {"m": "changed"} and rec.calls == ["m"]
+    assert target.stat()[1:] == stat[1:] and target.stat().st_mtime_ns == stat.st_mtime_ns
+    assert watcher.poll() == {}  # indistinguishable by stat yet
+    reads = count_reads(monkeypatch)
+    lib._clock = lambda: stat.st_mtime_ns + vp.RACY_NS  # the window has passed
+    assert watcher.poll() == {"m": "changed"} and rec.calls == ["m"] and reads.count(target) == 1
+    reads.clear()  # (the fixture's shipped files were written just before: re-read once too)
+    assert watcher.poll() == {} and reads == []  # once, not at every poll
 
 
 def test_callback_errors_do_not_stop_the_watcher(dirs, caplog):
@@ -367,6 +379,224 @@ def test_removed_playing_preset_logs_a_warning_and_keeps_playing(dirs, caplog):
 def test_watcher_rejects_bad_interval(dirs):
     with pytest.raises(PresetError, match="outside the allowed range"):
         PresetWatcher(PresetLibrary(*dirs), print, interval_s=0)
+
+
+# --------------------------------------------------------------------------- hot reload: bounded work (issue 12)
+def count_reads(monkeypatch) -> list[Path]:
+    """Record every file the one YAML loader opens (``vibsynth.io._read_capped``)."""
+    import vibsynth.io as vio
+
+    reads: list[Path] = []
+    original = vio._read_capped
+
+    def counting(path, **kwargs):
+        reads.append(Path(path))
+        return original(path, **kwargs)
+
+    monkeypatch.setattr(vio, "_read_capped", counting)
+    return reads
+
+
+def junk_text(rng: np.random.Generator, n_bytes: int) -> str:
+    """Printable YAML-ish junk (comment lines) of exactly ``n_bytes``."""
+    letters = np.frombuffer(b"abcdefghijklmnopqrstuvwxyz ", dtype=np.uint8)
+    body = letters[rng.integers(0, letters.size, n_bytes)].copy()
+    body[::64] = ord("\n")
+    body[1::64] = ord("#")
+    return body.tobytes().decode()
+
+
+def lines_about(caplog, fragment: str) -> list[str]:
+    return [r.getMessage() for r in caplog.records if fragment in r.getMessage()]
+
+
+def test_unchanged_files_are_never_reread(dirs, monkeypatch):
+    shipped, user = dirs
+    user.mkdir()
+    save_preset(Preset("mine", 0.3, 0.1), user / "mine.yaml")
+    lib = PresetLibrary(shipped, user, load=False)
+    lib._clock = lambda: time.time_ns() + 10 * 10**9  # past the racy window: only stat() changes count
+    lib.reload()
+    watcher = PresetWatcher(lib, Recorder())
+    reads = count_reads(monkeypatch)
+    for _ in range(20):
+        assert watcher.poll() == {}
+    assert reads == []
+
+
+def test_file_over_the_cap_is_never_read_and_logged_once(dirs, monkeypatch, caplog, rng):
+    import vibsynth.presets as vp
+
+    shipped, user = dirs
+    user.mkdir()
+    big = user / "big.yaml"
+    big.write_text(junk_text(rng, vp.MAX_PRESET_BYTES + 1))
+    reads = count_reads(monkeypatch)
+    with caplog.at_level(logging.INFO, logger="vibsynth.presets"):
+        lib = PresetLibrary(shipped, user)
+        watcher = PresetWatcher(lib, Recorder())
+        for k in range(30):
+            assert watcher.poll() == {}
+            if k == 10:  # still growing (a copy in progress): no new line
+                with open(big, "a") as fh:
+                    fh.write(junk_text(rng, 4096))
+    assert big not in reads
+    assert lines_about(caplog, "big.yaml") == [
+        f"{big}: {vp.MAX_PRESET_BYTES + 1:,} bytes, over the 1 MiB limit for a preset; not read; skipped"]
+    assert "over the 1 MiB limit" in lib.errors[str(big)] and lib.names() == ["alpha", "beta", "gamma"]
+
+    # it becomes a preset: read and added; too large again: one new line, last good version kept
+    edit(big, "version: 1\nintensity: 0.25\nbalance: 0.5\n")
+    assert watcher.poll() == {"big": "added"} and not lib.errors
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="vibsynth.presets"):
+        edit(big, junk_text(rng, 2 * vp.MAX_PRESET_BYTES))
+        for _ in range(10):
+            assert watcher.poll() == {}
+    assert len(lines_about(caplog, "big.yaml")) == 1 and "keeping the last good version" in caplog.text
+    assert lib.get("big").intensity == 0.25 and reads.count(big) == 1
+
+
+def test_same_size_edit_with_a_new_mtime_is_reloaded(dirs, monkeypatch):
+    shipped, user = dirs
+    user.mkdir()
+    target = user / "m.yaml"
+    target.write_text("intensity: 0.25\nbalance: 0\n")
+    before = target.stat()
+    lib = PresetLibrary(shipped, user, load=False)
+    lib._clock = lambda: before.st_mtime_ns + 10 * 10**9  # not racy
+    lib.reload()
+    watcher = PresetWatcher(lib, Recorder())
+    reads = count_reads(monkeypatch)
+    with open(target, "r+") as fh:  # in place: same inode, same size
+        fh.write("intensity: 0.75\nbalance: 0\n")
+    os.utime(target, ns=(before.st_atime_ns, before.st_mtime_ns + 1))
+    after = target.stat()
+    assert (after.st_size, after.st_ino) == (before.st_size, before.st_ino)
+    assert watcher.poll() == {"m": "changed"} and lib.get("m").intensity == 0.75 and reads == [target]
+
+
+def test_atomic_replace_with_same_size_and_mtime_is_seen_by_inode(dirs):
+    shipped, user = dirs
+    user.mkdir()
+    target = user / "m.yaml"
+    target.write_text("intensity: 0.25\nbalance: 0\n")
+    before = target.stat()
+    lib = PresetLibrary(shipped, user, load=False)
+    lib._clock = lambda: before.st_mtime_ns + 10 * 10**9
+    lib.reload()
+    watcher = PresetWatcher(lib, Recorder())
+    replacement = user / ".m.yaml.part"
+    replacement.write_text("intensity: 0.75\nbalance: 0\n")
+    os.utime(replacement, ns=(before.st_atime_ns, before.st_mtime_ns))
+    os.replace(replacement, target)
+    assert target.stat().st_ino != before.st_ino
+    assert watcher.poll() == {"m": "changed"}
+
+
+def test_unlistable_folder_is_reported_once_and_its_presets_kept(dirs, monkeypatch, caplog):
+    """Tests run as root, for whom chmod 000 changes nothing: os.scandir raises as it would."""
+    import vibsynth.presets as vp
+
+    shipped, user = dirs
+    user.mkdir()
+    save_preset(Preset("mine", 0.3, 0.1), user / "mine.yaml")
+    lib = PresetLibrary(shipped, user)
+    watcher = PresetWatcher(lib, Recorder())
+    real_scandir = os.scandir
+    denied = {"on": True}
+
+    def scandir(path):
+        if denied["on"] and Path(path) == user:
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_scandir(path)
+
+    monkeypatch.setattr(vp.os, "scandir", scandir)
+    with caplog.at_level(logging.INFO, logger="vibsynth.presets"):
+        for _ in range(20):
+            assert watcher.poll() == {}
+        assert "mine" in lib  # a permission glitch does not remove what may be playing
+        denied["on"] = False
+        save_preset(Preset("other", 0.2, 0.0), user / "other.yaml")
+        for _ in range(5):
+            watcher.poll()
+    assert lines_about(caplog, "preset folder") == [
+        f"preset folder {user}: cannot list it (Permission denied); keeping the presets read from it before "
+        "until it can be listed again",
+        f"preset folder {user}: can be listed again"]
+    assert {"mine", "other"} <= set(lib.names())
+
+
+def test_symlink_loops_are_reported_once(tmp_path, caplog):
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)  # the user folder is a symbolic link to itself
+    folder = tmp_path / "presets"
+    folder.mkdir()
+    (folder / "self.yaml").symlink_to(folder / "self.yaml")  # a preset file that is a loop
+    (folder / "ok.yaml").write_text("intensity: 0.5\nbalance: 0\n")
+    with caplog.at_level(logging.INFO, logger="vibsynth.presets"):
+        looped = PresetLibrary(folder, loop)
+        watcher = PresetWatcher(looped, Recorder())
+        for _ in range(10):
+            watcher.poll()
+    assert looped.names() == ["ok"]
+    assert lines_about(caplog, str(loop)) == [
+        f"preset folder {loop}: cannot list it (symbolic link loop); keeping the presets read from it before "
+        "until it can be listed again"]
+    assert lines_about(caplog, "self.yaml") == [f"{folder / 'self.yaml'}: cannot read (symbolic link loop); skipped"]
+
+
+def test_a_poll_reads_a_bounded_number_of_files(dirs, monkeypatch):
+    import vibsynth.presets as vp
+
+    shipped, user = dirs
+    user.mkdir()
+    lib = PresetLibrary(shipped, user)
+    watcher = PresetWatcher(lib, Recorder())
+    n = 2 * vp.POLL_READ_FILES + 20
+    for i in range(n):
+        save_preset(Preset(f"p{i:03d}", 0.5, 0.0), user / f"p{i:03d}.yaml")
+    reads = count_reads(monkeypatch)
+    counts = []
+    while len(lib) < n + 3:
+        before = len(reads)
+        watcher.poll()
+        counts.append(len(reads) - before)
+        assert len(counts) < 10
+    assert counts == [vp.POLL_READ_FILES, vp.POLL_READ_FILES, 20]
+
+
+def test_files_per_folder_are_capped_with_one_line(dirs, monkeypatch, caplog):
+    import vibsynth.presets as vp
+
+    shipped, user = dirs
+    user.mkdir()
+    monkeypatch.setattr(vp, "MAX_FILES_PER_FOLDER", 5)
+    for i in range(8):
+        save_preset(Preset(f"p{i}", 0.5, 0.0), user / f"p{i}.yaml")
+    with caplog.at_level(logging.INFO, logger="vibsynth.presets"):
+        lib = PresetLibrary(None, user)
+        watcher = PresetWatcher(lib, Recorder())
+        for _ in range(5):
+            watcher.poll()
+    assert len(lib) == 5
+    assert lines_about(caplog, "preset files") == [f"preset folder {user}: more than 5 preset files; only 5 are used"]
+
+
+def test_bomb_preset_is_refused_fast_and_named(dirs):
+    shipped, user = dirs
+    user.mkdir()
+    bomb = user / "bomb.yaml"
+    bomb.write_text(BOMB)
+    started = time.perf_counter()
+    lib = PresetLibrary(shipped, user)
+    assert time.perf_counter() - started < 0.5
+    assert lib.errors[str(bomb)].startswith(f"{bomb}:2:8: YAML alias '*a' (anchor '&a' on line 1): aliases are not "
+                                            "allowed in a preset")
+
+
+BOMB = "\n".join(["a: &a [x,x,x,x,x,x,x,x,x]"] + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]"
+                                                    for a, b in zip("abcdefgh", "bcdefghi")]) + "\n"
 
 
 # --------------------------------------------------------------------------- shipped presets

@@ -13,29 +13,31 @@ Schema (version 1; annotated example in ``docs/presets.md``)::
     provenance: {...}          # optional mapping: where the numbers came from
 
 Every error names the file, the line, the key, the value and the allowed range.
-Files are written atomically (temporary file + rename). :class:`PresetLibrary`
-merges shipped presets (package data) with the user's folder (user wins), and
-:class:`PresetWatcher` reloads it while the service runs.
+Files are read through :func:`vibsynth.io.load_yaml` (1 MiB cap, no YAML aliases) and
+written through :func:`vibsynth.io.atomic_write`. :class:`PresetLibrary` merges shipped
+presets (package data) with the user's folder (user wins), and :class:`PresetWatcher`
+reloads it while the service runs, re-reading only files whose (mtime, size, inode)
+changed, with bounded work per poll (see docs/presets.md, "Hot reload").
 """
 from __future__ import annotations
 
 import difflib
-import hashlib
+import errno
 import logging
 import math
 import os
 import re
+import stat
 import threading
+import time
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
-import yaml
-
-from vibsynth.config import Config, YamlDocument, parse_yaml
+from vibsynth.config import Config, YamlDocument, parse_yaml, read_yaml_file, short_repr
 from vibsynth.errors import PresetError, VibsynthError
-from vibsynth.io import atomic_write_text, read_text
+from vibsynth.io import MAX_YAML_BYTES, atomic_write, dump_yaml, size_limit_message
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -66,6 +68,9 @@ TAG_PATTERN = r"[A-Za-z0-9][A-Za-z0-9 _.-]{0,31}"
 MAX_TAGS = 16
 MAX_DESCRIPTION = 4000
 SUFFIX = ".yaml"
+WHAT = "a preset"
+#: Preset files over this size are never read (a preset is about 1.5 KB).
+MAX_PRESET_BYTES = MAX_YAML_BYTES
 
 _KEY_ORDER = ("version", "name", "description", "intensity", "balance", "glide_ms", "program", "tags", "provenance")
 _REQUIRED = ("intensity", "balance")
@@ -180,7 +185,7 @@ def _is_number(value: Any) -> bool:
 def _show(value: Any) -> str:
     if isinstance(value, bool) or value is None:
         return {True: "true", False: "false", None: "null"}[value]
-    return repr(value)
+    return short_repr(value)
 
 
 def _check_number(where: str, key: str, value: Any, low: float, high: float, *, integer: bool = False,
@@ -290,18 +295,25 @@ def parse_preset(text: str, origin: str = "<preset>", *, name: str | None = None
     PresetError
         Syntax error, duplicate or unknown key, wrong type, out-of-range value, newer version.
     """
-    doc = parse_yaml(text, origin, error=PresetError)
+    return _from_document(parse_yaml(text, origin, error=PresetError, what=WHAT), name)
+
+
+def _from_document(doc: YamlDocument, name: str | None) -> Preset:
     if doc.data is None:
-        raise PresetError(f"{origin}: the file is empty (a preset needs at least intensity and balance)")
+        raise PresetError(f"{doc.origin}: the file is empty (a preset needs at least intensity and balance)")
     return _validate(doc.data, doc, name)
 
 
 def load_preset(path: str | os.PathLike[str], *, origin: str = "") -> Preset:
-    """Read and validate a preset file (its name is the file name without ``.yaml``)."""
+    """Read and validate a preset file (its name is the file name without ``.yaml``).
+
+    Files over :data:`MAX_PRESET_BYTES` are refused before they are read, and YAML aliases
+    are refused (see :func:`vibsynth.io.load_yaml`).
+    """
     p = Path(path)
-    text = read_text(p, error=PresetError)
     stem = p.name[: -len(SUFFIX)] if p.name.endswith(SUFFIX) else p.stem
-    return replace(parse_preset(text, str(p), name=stem), path=p, origin=origin)
+    doc = read_yaml_file(p, error=PresetError, what=WHAT)
+    return replace(_from_document(doc, stem), path=p, origin=origin)
 
 
 _HEADER = "# vibsynth preset (schema: docs/presets.md). Edit freely; saved atomically.\n"
@@ -319,8 +331,8 @@ def _dump_block(data: Mapping[str, Any], indent: str = "") -> str:
         if isinstance(value, Mapping) and value:
             out.append(f"{indent}{key}:\n" + _dump_block(value, indent + "  "))
             continue
-        text = yaml.safe_dump({key: value}, sort_keys=False, allow_unicode=True, width=100, 
-                             default_flow_style=None if isinstance(value, list) else False)
+        text = dump_yaml({key: value}, sort_keys=False, width=100,
+                         default_flow_style=None if isinstance(value, list) else False)
         out.append("".join(indent + line if line.strip() else line for line in text.splitlines(keepends=True)))
     return "".join(out)
 
@@ -340,7 +352,10 @@ def save_preset(preset: Preset, path: str | os.PathLike[str] | None = None, *, h
     text = preset_to_yaml(preset, header=header)
     stem = target.name[: -len(SUFFIX)] if target.name.endswith(SUFFIX) else target.stem
     parse_preset(text, str(target), name=stem)  # never write what we could not read back
-    atomic_write_text(target, text)
+    try:
+        atomic_write(target, text)
+    except OSError as exc:
+        raise PresetError(f"{target}: cannot write ({exc.strerror})") from None
     return target
 
 
@@ -369,77 +384,241 @@ def _files(folder: Path | None) -> list[Path]:
                   and p.is_file())
 
 
+#: (mtime_ns, size, inode) of a preset file: what the watcher compares. Nothing is read to
+#: make it; a file is re-read only when its signature changes.
+Signature = tuple[int, int, int]
+
+#: At most this many preset files per folder are used (bounded work per poll).
+MAX_FILES_PER_FOLDER = 1000
+#: At most this many folder entries (any kind) are looked at per folder and poll.
+MAX_ENTRIES_PER_FOLDER = 20_000
+#: A watcher poll reads and parses at most this many files and bytes (at least one file);
+#: the rest are read by the next polls.
+POLL_READ_FILES = 50
+POLL_READ_BYTES = MAX_PRESET_BYTES
+#: A file read less than this after its modification time is read once more when this time
+#: has passed: an in-place edit of the same size within the file system's timestamp
+#: resolution (coarse kernel clock; 2 s on FAT) leaves (mtime, size, inode) unchanged.
+RACY_NS = 2_000_000_000
+
+
+@dataclass
+class _FileState:
+    origin: str
+    folder: Path
+    signature: Signature
+    preset: Preset | None  # the version in use: the last good one
+    error: str | None  # why the file's current content is not in use
+    recheck_ns: int | None  # wall-clock time of the one re-read of a racy file
+
+
 class PresetLibrary:
     """Shipped presets plus a user folder; a user preset overrides a shipped one of the same name.
 
     Parameters
     ----------
     shipped_dir : path-like or None
-        Default: :func:`shipped_presets_dir`. None = no shipped presets... pass ``False``-y only in tests.
+        Default: :func:`shipped_presets_dir`. None = no shipped presets (tests).
     user_dir : path-like or None
         User presets (need not exist yet).
+    load : bool
+        Read the folders now.
 
     Attributes
     ----------
     errors : dict of str to str
-        File -> message of every file that failed to load in the last :meth:`reload`
-        (a previously good version of it stays in use).
+        File -> message of every file whose content is not in use after the last
+        :meth:`reload` (syntax or schema error, over the size cap); a previously good
+        version of it stays in use.
+
+    Notes
+    -----
+    :meth:`reload` lists both folders and stats each ``*.yaml`` file (hidden files, such as
+    the temporary files of atomic writes, are ignored); it reads a file only when its
+    (mtime, size, inode) changed, and never a file over :data:`MAX_PRESET_BYTES`. Problems
+    (a file too large, a broken file, a folder that cannot be listed) are logged once when
+    they appear, not at every poll, and a folder that can be listed again is reported once.
     """
 
     def __init__(self, shipped_dir: str | os.PathLike[str] | None = None,
                  user_dir: str | os.PathLike[str] | None = None, *, load: bool = True) -> None:
         self.shipped_dir = Path(shipped_dir) if shipped_dir is not None else None
         self.user_dir = Path(user_dir).expanduser() if user_dir is not None else None
-        self._lock = threading.RLock()
+        self._lock = threading.RLock()  # guards the published state (short holds only)
+        self._reload_lock = threading.Lock()  # one reload at a time (watcher, save_user)
         self._presets: dict[str, Preset] = {}
-        self._by_file: dict[Path, Preset] = {}
+        self._states: dict[Path, _FileState] = {}
+        self._reported: dict[str, str] = {}
+        self._clock: Callable[[], int] = time.time_ns
         self.errors: dict[str, str] = {}
         if load:
             self.reload()
 
-    # ----------------------------------------------------------------- loading
-    def reload(self) -> dict[str, str]:
-        """Re-read both folders.
+    # ----------------------------------------------------------------- reporting once
+    def _report(self, key: str, state: str, level: int, message: str) -> None:
+        """Log ``message`` when ``key`` enters ``state`` (not again while it stays there)."""
+        if self._reported.get(key) != state:
+            self._reported[key] = state
+            log.log(level, "%s", message)
 
-        A file that fails to load keeps its last good version (if any) and its error
-        is logged and recorded in :attr:`errors`.
+    def _resolve(self, key: str, message: str | None = None) -> None:
+        """``key`` has no problem any more; log ``message`` if a problem had been reported."""
+        if self._reported.pop(key, None) is not None and message:
+            log.warning("%s", message)
+
+    # ----------------------------------------------------------------- scanning
+    def _scan(self, folder: Path) -> dict[Path, Signature] | None:
+        """Signatures of a folder's preset files (stat only); None when it cannot be listed."""
+        key = f"folder:{folder}"
+        found: dict[Path, Signature] = {}
+        entries = 0
+        try:
+            with os.scandir(folder) as handle:
+                for entry in handle:
+                    entries += 1
+                    if entries > MAX_ENTRIES_PER_FOLDER:
+                        self._report(f"entries:{folder}", "many", logging.WARNING,
+                                     f"preset folder {folder}: more than {MAX_ENTRIES_PER_FOLDER} entries; only the "
+                                     f"first {MAX_ENTRIES_PER_FOLDER} are looked at")
+                        break
+                    name = entry.name
+                    if name.startswith(".") or not name.endswith(SUFFIX):
+                        continue
+                    path = Path(entry.path)
+                    try:
+                        info = entry.stat()  # follows a symbolic link to its file
+                    except FileNotFoundError:  # vanished, or a dangling link: no file
+                        continue
+                    except OSError as exc:  # e.g. a symbolic link loop
+                        self._report(f"stat:{path}", f"errno {exc.errno}", logging.WARNING,
+                                     f"{path}: cannot read ({_why(exc)}); skipped")
+                        continue
+                    self._resolve(f"stat:{path}")
+                    if not stat.S_ISREG(info.st_mode):
+                        continue
+                    found[path] = (info.st_mtime_ns, info.st_size, info.st_ino)
+                    if len(found) >= MAX_FILES_PER_FOLDER:
+                        self._report(f"files:{folder}", "many", logging.WARNING,
+                                     f"preset folder {folder}: more than {MAX_FILES_PER_FOLDER} preset files; "
+                                     f"only {MAX_FILES_PER_FOLDER} are used")
+                        break
+        except FileNotFoundError:  # no folder is no presets (the user folder need not exist)
+            self._resolve(key, f"preset folder {folder}: gone; no presets from it")
+            return {}
+        except OSError as exc:  # permission denied, symbolic link loop, not a folder
+            self._report(key, f"errno {exc.errno}", logging.WARNING,
+                         f"preset folder {folder}: cannot list it ({_why(exc)}); keeping the presets read from "
+                         "it before until it can be listed again")
+            return None
+        self._resolve(key, f"preset folder {folder}: can be listed again")
+        if entries <= MAX_ENTRIES_PER_FOLDER:
+            self._reported.pop(f"entries:{folder}", None)
+        if len(found) < MAX_FILES_PER_FOLDER:
+            self._reported.pop(f"files:{folder}", None)
+        return found
+
+    def snapshot(self) -> dict[str, Signature]:
+        """Signature (mtime_ns, size, inode) of every preset file in both folders (nothing is read)."""
+        out: dict[str, Signature] = {}
+        with self._reload_lock:
+            for folder in (self.shipped_dir, self.user_dir):
+                if folder is not None:
+                    out.update({str(p): s for p, s in (self._scan(folder) or {}).items()})
+        return out
+
+    # ----------------------------------------------------------------- loading
+    def reload(self, *, read_files: int | None = None, read_bytes: int | None = None) -> dict[str, str]:
+        """Bring the library up to date with both folders.
+
+        Only files whose (mtime, size, inode) changed are read. A file that fails to load
+        keeps its last good version (if any); its error is logged once and recorded in
+        :attr:`errors`. A file over :data:`MAX_PRESET_BYTES` is never read.
+
+        Parameters
+        ----------
+        read_files, read_bytes : int, optional
+            Read at most this many files / bytes in this call (at least one file; the watcher
+            passes :data:`POLL_READ_FILES` / :data:`POLL_READ_BYTES`). Files left over are read
+            by the next calls. Default: no limit.
 
         Returns
         -------
         changes : dict of str to str
             Name -> ``"added"``, ``"changed"`` or ``"removed"`` for every effective change.
         """
-        with self._lock:
-            by_file: dict[Path, Preset] = {}
-            errors: dict[str, str] = {}
+        with self._reload_lock:
+            old = self._states
+            states: dict[Path, _FileState] = {}
+            now = self._clock()
+            n_read = bytes_read = 0
             for origin, folder in (("shipped", self.shipped_dir), ("user", self.user_dir)):
-                for path in _files(folder):
-                    try:
-                        by_file[path] = load_preset(path, origin=origin)
-                    except PresetError as exc:
-                        errors[str(path)] = str(exc)
-                        previous = self._by_file.get(path)
-                        if str(path) not in self.errors or self.errors[str(path)] != str(exc):
-                            log.error("%s%s", exc, "; keeping the last good version" if previous else "")
-                        if previous is not None:
-                            by_file[path] = previous
-            presets: dict[str, Preset] = {}
-            for path, preset in by_file.items():  # shipped first, then user: user wins
-                if preset.name in presets and presets[preset.name].origin == preset.origin:
-                    log.warning("%s: preset %r defined twice; using %s", path, preset.name, presets[preset.name].path)
+                if folder is None:
                     continue
-                presets[preset.name] = preset
-            old = self._presets
-            changes: dict[str, str] = {}
-            for name in old.keys() | presets.keys():
-                if name not in presets:
-                    changes[name] = "removed"
-                elif name not in old:
-                    changes[name] = "added"
-                elif old[name] != presets[name]:
-                    changes[name] = "changed"
-            self._presets, self._by_file, self.errors = presets, by_file, errors
-            return dict(sorted(changes.items()))
+                listing = self._scan(folder)
+                if listing is None:  # cannot list it now: keep what it gave before
+                    states.update((p, s) for p, s in old.items() if s.folder == folder)
+                    continue
+                for path in sorted(listing):
+                    signature, previous = listing[path], old.get(path)
+                    if previous is not None and previous.signature == signature and not (
+                            previous.recheck_ns is not None and now >= previous.recheck_ns):
+                        states[path] = previous
+                        continue
+                    last_good = previous.preset if previous is not None else None
+                    keeping = "; keeping the last good version" if last_good is not None else ""
+                    size = signature[1]
+                    if size > MAX_PRESET_BYTES:
+                        message = size_limit_message(path, size, MAX_PRESET_BYTES, WHAT)
+                        self._report(f"file:{path}", "too large", logging.WARNING, f"{message}; skipped{keeping}")
+                        states[path] = _FileState(origin, folder, signature, last_good, message, None)
+                        continue
+                    if n_read and ((read_files is not None and n_read >= read_files)
+                                   or (read_bytes is not None and bytes_read + size > read_bytes)):
+                        if previous is not None:  # its old signature stays: read by a later call
+                            states[path] = previous
+                        continue
+                    n_read += 1
+                    bytes_read += size
+                    recheck = signature[0] + RACY_NS if now - signature[0] < RACY_NS else None
+                    try:
+                        preset = load_preset(path, origin=origin)
+                    except PresetError as exc:
+                        self._report(f"file:{path}", str(exc), logging.ERROR, f"{exc}{keeping}")
+                        states[path] = _FileState(origin, folder, signature, last_good, str(exc), recheck)
+                    else:
+                        self._resolve(f"file:{path}")
+                        states[path] = _FileState(origin, folder, signature, preset, None, recheck)
+            for path in old.keys() - states.keys():  # gone: a new problem with it is news again
+                self._resolve(f"file:{path}")
+            if states.keys() == old.keys() and all(states[p] is old[p] for p in states):
+                return {}
+            return self._publish(states)
+
+    def _publish(self, states: dict[Path, _FileState]) -> dict[str, str]:
+        presets: dict[str, Preset] = {}
+        ordered = sorted(states.items(), key=lambda item: (item[1].origin != "shipped", str(item[0])))
+        for path, state in ordered:  # shipped first, then user: user wins
+            preset = state.preset
+            if preset is None:
+                continue
+            if preset.name in presets and presets[preset.name].origin == preset.origin:
+                self._report(f"twice:{preset.name}", str(path), logging.WARNING,
+                             f"{path}: preset {preset.name!r} defined twice; using {presets[preset.name].path}")
+                continue
+            presets[preset.name] = preset
+        errors = {str(p): s.error for p, s in ordered if s.error is not None}
+        with self._lock:
+            previous = self._presets
+            self._presets, self._states, self.errors = presets, states, errors
+        changes: dict[str, str] = {}
+        for name in previous.keys() | presets.keys():
+            if name not in presets:
+                changes[name] = "removed"
+            elif name not in previous:
+                changes[name] = "added"
+            elif previous[name] != presets[name]:
+                changes[name] = "changed"
+        return dict(sorted(changes.items()))
 
     # ----------------------------------------------------------------- queries
     def names(self) -> list[str]:
@@ -533,19 +712,6 @@ class PresetLibrary:
         self.reload()
         return path
 
-    def snapshot(self) -> dict[str, tuple[int, int, str]]:
-        """Signature (mtime_ns, size, sha256) of every preset file in both folders."""
-        out: dict[str, tuple[int, int, str]] = {}
-        for folder in (self.shipped_dir, self.user_dir):
-            for path in _files(folder):
-                try:
-                    stat = path.stat()
-                    digest = hashlib.sha256(path.read_bytes()).hexdigest()
-                except OSError:
-                    continue  # vanished between listing and reading: next poll sees it
-                out[str(path)] = (stat.st_mtime_ns, stat.st_size, digest)
-        return out
-
 
 def load_library(config: Config | None = None) -> PresetLibrary:
     """The preset library for a config: shipped presets + ``presets.user_dir`` (or the platform folder)."""
@@ -568,6 +734,15 @@ class PresetWatcher:
         preset ``library.get(name)`` raises: keep what is playing.
     interval_s : float
         Polling period (0.25 s: changes are picked up well within a second).
+
+    Notes
+    -----
+    Everything happens in the watcher's own thread, never in the audio callback. A poll
+    lists the folders and stats the ``*.yaml`` files (at most :data:`MAX_FILES_PER_FOLDER`
+    each); it reads only files whose (mtime, size, inode) changed, at most
+    :data:`POLL_READ_FILES` files and :data:`POLL_READ_BYTES` bytes per poll, and never a
+    file over :data:`MAX_PRESET_BYTES` (logged once). A 50 MB file in the folder costs one
+    ``stat`` per poll.
     """
 
     def __init__(self, library: PresetLibrary, on_change: Callable[[str], None], interval_s: float = 0.25) -> None:
@@ -578,15 +753,10 @@ class PresetWatcher:
         self.interval_s = float(interval_s)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._snapshot = library.snapshot()
 
     def poll(self) -> dict[str, str]:
-        """Check once; reload and notify if any file changed. Returns the changes."""
-        snapshot = self.library.snapshot()
-        if snapshot == self._snapshot:
-            return {}
-        self._snapshot = snapshot
-        changes = self.library.reload()
+        """Check once; read what changed (bounded, see the class notes), notify. Returns the changes."""
+        changes = self.library.reload(read_files=POLL_READ_FILES, read_bytes=POLL_READ_BYTES)
         for name, kind in changes.items():
             log.info("preset %r %s", name, kind)
             try:
@@ -608,7 +778,6 @@ class PresetWatcher:
         """Start the polling thread (daemon); returns self."""
         if self._thread is None or not self._thread.is_alive():
             self._stop.clear()
-            self._snapshot = self.library.snapshot()
             self._thread = threading.Thread(target=self._run, name="vibsynth-preset-watcher", daemon=True)
             self._thread.start()
         return self
@@ -625,6 +794,12 @@ class PresetWatcher:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def _why(exc: OSError) -> str:
+    if exc.errno == errno.ELOOP:
+        return "symbolic link loop"
+    return exc.strerror or str(exc)
 
 
 def iter_preset_files(folder: str | os.PathLike[str]) -> Iterable[Path]:

@@ -1,0 +1,167 @@
+"""End to end: preset hot reload stays off the audio path (issue 12, fault 5).
+
+``vibsynth serve`` runs on the JACK dummy server with a user preset folder. Underflows are
+counted from ``/status`` over OSC in two windows of the same run: a quiet baseline, then with
+a 50 MB junk ``.yaml`` in the folder. The junk file must cost no more underflows than the
+baseline plus a small slack (before the fix the watcher re-read and hashed it every poll:
+about 3 underflows a second), the log must say exactly once that it is skipped, and hot
+reload must keep working beside it (a preset added afterwards is playable).
+
+Run: ``scripts/with_jack.sh -- python -m pytest tests/e2e/test_reload_e2e.py -q -s``.
+"""
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.e2e.jackutil import REALTIME, e2e_required, jack_server_available
+from vibsynth.control.osc_codec import decode_packet, encode_message
+
+pytestmark = pytest.mark.e2e
+
+ROOT = Path(__file__).resolve().parents[2]
+WINDOW_S = float(os.environ.get("VIBSYNTH_RELOAD_WINDOW_S", "10"))
+JUNK_BYTES = 50 * 1024 * 1024
+#: Underflows the junk window may have above the baseline: PortAudio counts the dummy
+#: driver's own late wake-ups on this shared VM as underflows (0-2 per 10 s).
+SLACK = 3
+START_TIMEOUT_S = 180.0
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Osc:
+    """A UDP client of the service; replies come back to its own socket."""
+
+    def __init__(self, port: int) -> None:
+        self.target = ("127.0.0.1", port)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+
+    def send(self, address: str, *args: object) -> None:
+        self.sock.sendto(encode_message(address, args), self.target)
+
+    def request(self, address: str, *args: object, expect: str, timeout: float = 5.0) -> tuple:
+        self.send(address, *args)
+        self.sock.settimeout(timeout)
+        while True:
+            msg = decode_packet(self.sock.recvfrom(65536)[0])
+            if msg.address == expect:
+                return msg.args
+
+    def status(self) -> dict:
+        args = self.request("/vibsynth/status", expect="/vibsynth/status.reply")
+        return dict(zip(args[::2], args[1::2]))
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def _start(tmp_path: Path, presets: Path) -> tuple[subprocess.Popen, int, Path]:
+    port = _free_udp_port()
+    config = tmp_path / "vibsynth.yaml"
+    config.write_text(f"version: 1\nosc:\n  port: {port}\n", encoding="utf-8")
+    log_path = tmp_path / "serve.log"
+    env = dict(os.environ, PYTHONPATH=str(ROOT), VIBSYNTH_HOST_API="JACK", JACK_NO_AUDIO_RESERVATION="1",
+               VIBSYNTH_PRESETS_DIR=str(presets), XDG_CONFIG_HOME=str(tmp_path / "xdg-config"))
+    cmd = [sys.executable, "-m", "vibsynth", "serve", "--config", str(config), "--output", "sounddevice",
+           "--no-midi", "--osc-port", str(port), "--intensity", "0.5"]
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+    deadline = time.monotonic() + START_TIMEOUT_S
+    probe = Osc(port)
+    try:
+        while True:
+            if proc.poll() is not None:
+                raise AssertionError(f"serve exited ({proc.returncode}):\n{log_path.read_text()}")
+            if time.monotonic() > deadline:
+                _stop(proc)
+                raise AssertionError("serve did not answer /ping in time:\n" + log_path.read_text())
+            try:
+                probe.request("/vibsynth/ping", 1, expect="/vibsynth/pong", timeout=0.5)
+                return proc, port, log_path
+            except (socket.timeout, ConnectionRefusedError):
+                continue
+    finally:
+        probe.close()
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    proc.terminate()
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def _underflows_over(client: Osc, seconds: float) -> int:
+    """Underflows over ``seconds`` of streaming, with a knob move a second as a player would."""
+    rng = np.random.default_rng(12)
+    before = client.status()
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        client.send("/vibsynth/balance", float(rng.uniform(-1.0, 1.0)))
+        time.sleep(1.0)
+    after = client.status()
+    return int(after["underflows"] - before["underflows"])
+
+
+@REALTIME
+def test_a_50mb_file_in_the_preset_folder_costs_no_underflows(tmp_path):
+    ok, reason = jack_server_available()
+    if not ok:
+        if e2e_required():
+            pytest.fail(f"VIBSYNTH_E2E_REQUIRED=1 but {reason}")
+        pytest.skip(reason)
+    presets = tmp_path / "presets"
+    presets.mkdir()
+    (presets / "mine.yaml").write_text("version: 1\nintensity: 0.4\nbalance: 0.2\n", encoding="utf-8")
+    proc, port, log_path = _start(tmp_path, presets)
+    client = Osc(port)
+    try:
+        time.sleep(1.0)  # stream start-up is not the steady state
+        baseline = _underflows_over(client, WINDOW_S)
+
+        # 50 MB of (seeded) junk, written under a hidden name and renamed in: the watcher
+        # sees the whole file at once, as it would after a copy.
+        junk = presets / "junk.yaml"
+        hidden = presets / ".junk.yaml.part"
+        block = np.random.default_rng(5).integers(0, 256, 1 << 20, dtype=np.uint8).tobytes()
+        with open(hidden, "wb") as fh:
+            for _ in range(JUNK_BYTES // len(block)):
+                fh.write(block)
+        os.replace(hidden, junk)
+        time.sleep(1.5)  # the watcher (0.5 s polls) has seen it
+        loaded = _underflows_over(client, WINDOW_S)
+
+        # hot reload still works beside the junk file
+        (presets / "added.yaml").write_text("version: 1\nintensity: 0.6\nbalance: -0.3\n", encoding="utf-8")
+        deadline = time.monotonic() + 5.0
+        while True:
+            client.send("/vibsynth/preset", "added")
+            if client.request("/vibsynth/get", "preset", expect="/vibsynth/preset") == ("added",):
+                break
+            assert time.monotonic() < deadline, "a preset added next to the junk file was not picked up"
+            time.sleep(0.2)
+    finally:
+        client.close()
+        _stop(proc)
+    log = log_path.read_text()
+    print(f"\nunderflows per {WINDOW_S:g} s: baseline {baseline}, with a 50 MB file in the preset folder {loaded}")
+    skipped = [line for line in log.splitlines() if "junk.yaml" in line]
+    assert len(skipped) == 1, log
+    assert "over the 1 MiB limit" in skipped[0] and "not read" in skipped[0], skipped[0]
+    assert "Traceback" not in log
+    assert loaded <= baseline + SLACK, f"baseline {baseline}, with the junk file {loaded}"
