@@ -7,7 +7,8 @@ can SIGKILL it, then checks what the issue asks for:
   OSC keeps answering and the knobs stay as they were;
 * when the server comes back under the same name, sound resumes (captured from JACK)
   within 5 s, at the same level with the same knobs;
-* SIGTERM exits with code 0 in < 2 s, during the loss and after the recovery.
+* SIGTERM exits with code 0 in < 2 s, during the loss and after the recovery, and
+  while the server is frozen (SIGSTOP: PortAudio calls hang and are abandoned).
 
 Skips when ``jackd`` or JACK-Client is missing, unless ``VIBSYNTH_E2E_REQUIRED=1``.
 Run: ``.venv/bin/python -m pytest tests/e2e/test_device_loss_e2e.py -q -s`` (no
@@ -49,12 +50,18 @@ def unavailable(reason: str) -> None:
 
 
 class JackServer:
-    """A private ``jackd`` on the dummy driver (real-time if allowed, else not), killable at will."""
+    """A private ``jackd`` on the dummy driver (real-time if allowed, else not), killable at will.
+
+    A SIGKILLed server leaves its entry in JACK's shared registry (8 servers at most per
+    machine), which only a server of the same name reclaims: :meth:`stop` therefore
+    restarts a killed server and stops it cleanly.
+    """
 
     def __init__(self, name: str, log: Path) -> None:
         self.name, self.log = name, log
         self.env = dict(os.environ, JACK_DEFAULT_SERVER=name, JACK_NO_AUDIO_RESERVATION="1")
         self.proc: subprocess.Popen | None = None
+        self.killed = False
 
     def _ready(self) -> bool:
         return subprocess.run(["jack_wait", "-w", "-t", "10"], env=self.env, stdout=subprocess.DEVNULL,
@@ -67,8 +74,9 @@ class JackServer:
                 self.proc = subprocess.Popen(["jackd", "-n", self.name, *realtime, "-d", "dummy", "-r", "48000",
                                               "-p", "128"], env=self.env, stdout=log, stderr=subprocess.STDOUT)
             if self._ready():
+                self.killed = False
                 return time.monotonic()
-            self.stop()
+            self._terminate()
         raise AssertionError(f"jackd did not start:\n{self.log.read_text()}")
 
     def kill(self) -> float:
@@ -76,10 +84,26 @@ class JackServer:
         assert self.proc is not None
         self.proc.kill()
         self.proc.wait(timeout=10)
+        self.killed = True
         return time.monotonic()
 
+    def freeze(self) -> None:
+        """SIGSTOP: the server stops answering (clients' calls into it hang)."""
+        assert self.proc is not None
+        self.proc.send_signal(signal.SIGSTOP)
+
     def stop(self) -> None:
+        """Stop cleanly (restarting a killed server first, to free its registry entry)."""
+        if self.killed:
+            try:
+                self.start()
+            except AssertionError:
+                return
+        self._terminate()
+
+    def _terminate(self) -> None:
         if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGCONT)
             self.proc.terminate()
             try:
                 self.proc.wait(timeout=10)
@@ -203,7 +227,7 @@ def jack(tmp_path, monkeypatch):
         import jack as _jack  # noqa: F401
     except Exception as exc:  # noqa: BLE001 - JACK-Client or libjack missing
         unavailable(f"JACK-Client is not usable ({exc})")
-    server = JackServer(f"vibsynth-loss-{os.getpid()}-{tmp_path.name[-12:]}", tmp_path / "jackd.log")
+    server = JackServer(f"vibsynth-loss-{os.getpid()}", tmp_path / "jackd.log")
     monkeypatch.setenv("JACK_DEFAULT_SERVER", server.name)  # for this process's capture clients
     monkeypatch.setenv("JACK_NO_AUDIO_RESERVATION", "1")
     server.start()
@@ -272,5 +296,23 @@ def test_sigterm_while_the_device_is_lost_exits_in_time(jack, tmp_path):
         log = serve.log()
         assert code == 0 and took < EXIT_WITHIN_S, log
         assert "Traceback" not in log
+    finally:
+        serve.close()
+
+
+def test_sigterm_while_jack_is_frozen_and_portaudio_calls_hang_exits_in_time(jack, tmp_path):
+    serve = Serve(tmp_path, jack)
+    try:
+        serve.wait_state("streaming", 10.0)
+        jack.freeze()
+        status, _ = serve.wait_state("device lost", 5.0)
+        assert status["output_reason"] == "no heartbeat for 0.5 s"
+        time.sleep(2.5)  # closing the stalled stream hangs; the first re-scan hangs in jack_client_open
+        assert serve.osc.status()["output"] == "device lost"  # control plane still up
+        code, took = serve.sigterm()
+        print(f"\nSIGTERM while JACK is frozen (hung PortAudio calls): exit {code} in {took:.2f} s")
+        log = serve.log()
+        assert code == 0 and took < EXIT_WITHIN_S, log
+        assert "closing the audio stream hung" in log and "Traceback" not in log
     finally:
         serve.close()

@@ -378,6 +378,36 @@ def test_an_open_that_hangs_forever_is_abandoned(small_bank, sd, world):
     assert time.monotonic() - started < 1.5
 
 
+def test_retries_wait_while_two_portaudio_calls_are_hung(small_bank, sd, world):
+    """A frozen driver: hung calls are not piled up (libjack serialises client opens on one mutex)."""
+    clock = Clock()
+    out = make_output(small_bank, "ALSA", clock)
+    out.start()
+    pump(out)
+    out.supervisor.step()
+    out._runtime.call_timeout_s = 0.1
+    world.hang_open = True
+    sd.streams[0].device_error()
+    clock.advance(0.05)
+    out.supervisor.step()
+    for _ in range(2):  # two attempts, each with an open that hangs
+        clock.advance(2.0)
+        out.supervisor.step()
+    assert out._runtime.hung() == ["opening the audio device"] * 2
+    opened = FakeLib.loaded
+    clock.advance(2.0)
+    out.supervisor.step()
+    assert "waiting for 2 hung PortAudio calls to return" in out.supervisor.last_error
+    assert FakeLib.loaded == opened  # no new library copy, no new call
+    world.hang_open = False
+    world.hang.set()  # the driver wakes up: the hung opens return
+    deadline = time.monotonic() + 2.0
+    while out._runtime.hung() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    run_until(out, clock, STREAMING, beat=True)
+    out.stop()
+
+
 def test_stop_while_a_retry_hangs_returns_in_bounded_time(small_bank, sd, world):
     out = SoundDeviceOutput(Engine(small_bank, channels=1), host_api="JACK", block_size=64,
                             heartbeat_timeout_s=0.2, backoff=Backoff(0.05, 0.1))
@@ -423,6 +453,35 @@ def test_fresh_library_copy_keeps_the_old_one_loaded(sd, world):
     from vibsynth.engine import pa_runtime
 
     assert old in pa_runtime._KEEP_ALIVE
+
+
+class PtrLib:
+    """A library called with stream pointers, as sounddevice streams are."""
+
+    def __init__(self, abort_code: int) -> None:
+        self.abort_code, self.calls = abort_code, []
+
+    def Pa_AbortStream(self, ptr):  # noqa: N802
+        self.calls.append(("abort", ptr))
+        return self.abort_code
+
+    def Pa_CloseStream(self, ptr):  # noqa: N802
+        self.calls.append(("close", ptr))
+        return 0
+
+
+@pytest.mark.parametrize("abort_code, closed", [(0, True), (-9983, True), (-9999, False)])
+def test_a_stream_is_closed_through_its_own_library_only_if_it_stopped(sd, world, abort_code, closed):
+    runtime = PortAudioRuntime(sd)
+    lib = sd._lib = PtrLib(abort_code)
+    stream = types.SimpleNamespace(_ptr="stream-1")
+    sd._ffi.NULL = None
+    assert runtime.close(stream, dead=False) is closed
+    if closed:  # paNoError or paStreamIsStopped: closed, instance still usable
+        assert lib.calls == [("abort", "stream-1"), ("close", "stream-1")] and stream._ptr is None
+        assert not runtime.dirty
+    else:  # the stop failed (JACK gone): Pa_CloseStream would assert; the stream is abandoned
+        assert lib.calls == [("abort", "stream-1")] and runtime.dirty
 
 
 # ---------------------------------------------------------------------- what users see

@@ -38,9 +38,34 @@ log = logging.getLogger(__name__)
 CALL_TIMEOUT_S = 2.0
 #: Time limit of stopping/closing a stream before it is abandoned.
 CLOSE_TIMEOUT_S = 1.0
+#: No new re-scan while this many abandoned PortAudio calls have not returned: they may
+#: hold a driver-wide lock (libjack's client-open mutex), so more attempts would only pile up.
+MAX_HUNG_CALLS = 2
 
 #: Library instances and streams that must never be freed (PortAudio/JACK may still call into them).
 _KEEP_ALIVE: list[Any] = []
+
+#: PortAudio's paStreamIsStopped: stopping a stream that already stopped is fine.
+PA_STREAM_IS_STOPPED = -9983
+
+_STREAM_METHODS = {"Pa_StopStream": "stop", "Pa_AbortStream": "abort", "Pa_CloseStream": "close"}
+
+
+def _stream_call(sd: ModuleType, lib: Any, stream: Any, function: str) -> int:
+    """``Pa_StopStream``/``Pa_AbortStream``/``Pa_CloseStream`` on ``stream`` through ``lib``; the error code.
+
+    A sounddevice stream (it has ``_ptr``) is called through the library it was opened
+    with, not through ``sounddevice._lib`` (which may meanwhile point to a fresh copy).
+    Other stream objects (test doubles) are called by method name and return 0.
+    """
+    ptr = getattr(stream, "_ptr", None)
+    if ptr is not None and lib is not None and hasattr(lib, function):
+        code = int(getattr(lib, function)(ptr))
+        if function == "Pa_CloseStream":
+            stream._ptr = sd._ffi.NULL
+        return code
+    getattr(stream, _STREAM_METHODS[function])()
+    return 0
 
 
 def _loaded_library_path(sd: ModuleType) -> str:
@@ -159,15 +184,30 @@ class PortAudioRuntime:
         self.dirty = ""
         self.generation = 0
         self._stderr = _StderrMute()
+        self._hung: list[tuple[str, threading.Event]] = []
 
     # -- bounded calls ---------------------------------------------------------------
     def call(self, fn: Callable[[], Any], what: str, timeout_s: float | None = None) -> Any:
-        """:func:`call_with_timeout`; a hung call makes the instance dirty."""
+        """:func:`call_with_timeout`; a hung call makes the instance dirty and is remembered until it returns."""
+        returned = threading.Event()
+
+        def run() -> Any:
+            try:
+                return fn()
+            finally:
+                returned.set()
+
         try:
-            return call_with_timeout(fn, self.call_timeout_s if timeout_s is None else timeout_s, what)
+            return call_with_timeout(run, self.call_timeout_s if timeout_s is None else timeout_s, what)
         except HungCallError:
+            self._hung.append((what, returned))
             self.mark_dirty(f"{what} hung")
             raise
+
+    def hung(self) -> list[str]:
+        """This runtime's abandoned calls that have not returned yet."""
+        self._hung = [(what, done) for what, done in self._hung if not done.is_set()]
+        return [what for what, _ in self._hung]
 
     def mark_dirty(self, why: str) -> None:
         """Never call this library instance again (its next re-scan loads a fresh copy)."""
@@ -192,6 +232,9 @@ class PortAudioRuntime:
             PortAudio could not be initialised (or a call hung: :class:`HungCallError`).
         """
         sd = self.sd
+        hung = self.hung()
+        if len(hung) >= MAX_HUNG_CALLS:
+            raise DeviceError(f"waiting for {len(hung)} hung PortAudio calls to return ({', '.join(hung)})")
         if self.dirty:
             lib = self.call(lambda: self.fresh_library(sd), "loading a fresh PortAudio library")
             _KEEP_ALIVE.append(sd._lib)
@@ -253,21 +296,29 @@ class PortAudioRuntime:
         if dead:
             self.abandon(stream, "its JACK server died under an open stream")
             return False
-        generation = self.generation
+        lib = getattr(self.sd, "_lib", None)  # the stream's own library, even if a copy replaces it later
 
-        def shut() -> None:
-            (stream.stop if graceful else stream.abort)()
-            if self.generation == generation:  # never call a retired library through its stream
-                stream.close()
+        def shut() -> bool:
+            code = _stream_call(self.sd, lib, stream, "Pa_StopStream" if graceful else "Pa_AbortStream")
+            if code not in (0, PA_STREAM_IS_STOPPED):
+                # Never close a stream that did not stop: with its JACK server gone,
+                # Pa_CloseStream asserts and aborts the process.
+                log.info("stopping the audio stream failed (PortAudio error %d); abandoning it", code)
+                return False
+            _stream_call(self.sd, lib, stream, "Pa_CloseStream")
+            return True
 
         try:
-            self.call(shut, "closing the audio stream", self.close_timeout_s)
+            closed = self.call(shut, "closing the audio stream", self.close_timeout_s)
         except HungCallError:
             _KEEP_ALIVE.append(stream)
             return False
-        except Exception as exc:  # noqa: BLE001 - a PortAudioError on close: the stream is gone anyway
+        except Exception as exc:  # noqa: BLE001 - a stand-in stream's error: treat as closed
             log.info("closing the audio stream: %s", exc)
-        return True
+            return True
+        if not closed:
+            self.abandon(stream, "its stream could not be stopped")
+        return bool(closed)
 
     def shutdown(self) -> bool:
         """At process exit: terminate PortAudio if that is safe, else disarm sounddevice's exit hook.
