@@ -19,6 +19,11 @@ or start with --intensity 0.5 [--balance 1] or --preset NAME.
 Outputs: auto (PortAudio, else a silent null output with a warning), sounddevice
 (PortAudio; an error if it cannot be opened), null (no sound card), wav (-o FILE
 --seconds N: rendered faster than real time).
+
+A lost audio device (unplugged, JACK server stopped) does not stop the service:
+OSC/MIDI keep working, /status and the status line say "device lost: <reason>",
+and it retries every 0.25-2 s until the device is back, with the same knobs.
+SIGTERM/Ctrl-C exit (code 0) within 2 s in every state.
 """
 
 
