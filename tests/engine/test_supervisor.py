@@ -415,7 +415,7 @@ def test_stop_while_a_retry_hangs_returns_in_bounded_time(small_bank, sd, world)
     world.hang_open = True
     sd.streams[0].jack_server_died()
     deadline = time.monotonic() + 5.0
-    while "opening the audio device" not in [c for c in hung_calls()] and out.supervisor.attempts == 0:
+    while out.supervisor.attempts == 0:
         assert time.monotonic() < deadline, "no retry started"
         time.sleep(0.02)
     time.sleep(0.1)  # the supervisor is now inside the hung open

@@ -215,13 +215,6 @@ class PortAudioRuntime:
             self.dirty = why
             log.info("PortAudio instance %d retired: %s", self.generation, why)
 
-    def has_jack(self) -> bool:
-        """Whether this instance talks to a JACK server."""
-        try:
-            return any("jack" in str(api["name"]).lower() for api in self.sd.query_hostapis())
-        except Exception:  # noqa: BLE001 - not initialised: no JACK client either
-            return False
-
     # -- re-scan ----------------------------------------------------------------------
     def reinitialize(self) -> None:
         """Make PortAudio re-scan the devices (terminate + initialise, or a fresh library copy).
@@ -252,16 +245,18 @@ class PortAudioRuntime:
 
     def _initialize(self) -> None:
         sd = self.sd
+        lib = sd._lib
         self._stderr.mute()
         try:
-            code = sd._lib.Pa_Initialize()
+            code = lib.Pa_Initialize()
         finally:
             self._stderr.restore()
         try:
             sd._check(code, "Error initializing PortAudio")
         except Exception as exc:
             raise DeviceError(str(exc)) from None
-        sd._initialized += 1
+        if sd._lib is lib:  # not a late return after this instance was replaced
+            sd._initialized += 1
 
     def terminate(self) -> None:
         """``Pa_Terminate`` until uninitialised, unless dirty (then nothing: it could abort the process)."""
