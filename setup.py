@@ -1,4 +1,10 @@
-"""Build the compiled real-time core (vibsynth/engine/_core.c); everything else is in pyproject.toml."""
+"""Build the compiled parts; everything else is in pyproject.toml.
+
+* ``vibsynth.engine._core``: the real-time core (callback, mix, command ring, scheduler).
+* ``vibsynth.control._oscfast``: the OSC UDP receive loop and its fast path.
+"""
+import sys
+
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
@@ -17,6 +23,12 @@ class BuildExt(build_ext):
 
 
 setup(
-    ext_modules=[Extension("vibsynth.engine._core", ["vibsynth/engine/_core.c"])],
+    ext_modules=[
+        Extension("vibsynth.engine._core", ["vibsynth/engine/_core.c"], depends=["vibsynth/engine/_core_api.h"]),
+        Extension(
+            "vibsynth.control._oscfast", ["vibsynth/control/_oscfast.c"], depends=["vibsynth/engine/_core_api.h"],
+            libraries=["ws2_32"] if sys.platform == "win32" else [],
+        ),
+    ],
     cmdclass={"build_ext": BuildExt},
 )

@@ -624,7 +624,7 @@ def test_udp_allow_list_drops_others():
         client.sendto(encode_message("/vibsynth/ping"), ("127.0.0.1", server.port))
         with pytest.raises(socket.timeout):
             client.recvfrom(65536)
-        assert server.stats.denied == 1 and ctl.engine.commands == []
+        assert server.counters()["denied"] == 1 and ctl.engine.commands == []
     finally:
         client.close()
         server.stop()

@@ -234,7 +234,7 @@ def test_socket_burst_server_survives():
         state = knob_state(ctl)
         assert state[(2, "intensity")] == 0.25
         assert all(v == 0.0 for k, v in state.items() if k != (2, "intensity"))
-        received = server.stats.packets
+        received = server.counters()["packets"]
         counted = server.handler.stats.errors + server.handler.stats.malformed
         assert server.stats.handler_errors == 0 and counted > 0
         print(f"\nsocket burst: sent {sent} + 2, received {received}, counted errors {counted}, "

@@ -191,12 +191,38 @@ class Controller:
             at = command.at_frame
             frame = self.engine.frame_position if at is None else int(at)
             for c in chans:
-                effective = self._effective[c]
-                if frame < effective.get(field, -1):
-                    continue  # a value timed later is already waiting: it stays the target
-                effective[field] = frame
-                self._state[c] = replace(self._state[c], **{field: value})
-                events.append(KnobEvent(c, _EVENT_NAMES.get(field, field), value, source))
+                self._set_if_latest(c, field, value, frame, source, events)
+            listeners = list(self._listeners) if events else []
+        for listener in listeners:
+            for event in events:
+                listener(event)
+
+    def _set_if_latest(self, c: int, field: str, value: object, frame: int, source: str,
+                       events: list[KnobEvent]) -> None:
+        """With the lock held: set ``field`` of channel ``c`` unless a later-timed value waits."""
+        effective = self._effective[c]
+        if frame < effective.get(field, -1):
+            return
+        effective[field] = frame
+        self._state[c] = replace(self._state[c], **{field: value})
+        events.append(KnobEvent(c, _EVENT_NAMES.get(field, field), value, source))
+
+    def record(self, updates: Iterable[tuple[str, int, float]], seq: int, *, source: str) -> None:
+        """Record knob moves another producer already handed to the engine (the OSC fast path).
+
+        Parameters
+        ----------
+        updates : iterable of (knob name, 0-based channel, value)
+            Validated values, applied immediately (not timetagged).
+        seq : int
+            The engine sequence number of the last of them (for :meth:`sync`).
+        """
+        events = []
+        with self._lock:
+            self._last_seq = max(self._last_seq, int(seq))
+            frame = self.engine.frame_position
+            for name, c, value in updates:
+                self._set_if_latest(c, name, value, frame, source, events)
             listeners = list(self._listeners) if events else []
         for listener in listeners:
             for event in events:

@@ -25,11 +25,13 @@ import re
 import threading
 import time
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, Callable, Iterable, Sequence
 
 from vibsynth import __version__
 from vibsynth.control.controller import Controller, KnobEvent, check_finite, check_range
 from vibsynth.control.osc_address import GLOBAL_METHODS, AddressSpace, normalize_prefix
+from vibsynth.control.osc_fast import make_receiver
 from vibsynth.control.osc_codec import (
     IMMEDIATE,
     MalformedPacket,
@@ -867,7 +869,8 @@ class OscServer:
             extra_status=self._status_extras,
         )
         self.udp = UdpTransport(host, port, self.handler.handle_batch, allow=allow_set, reply_port=reply_port,
-                                rcvbuf=rcvbuf, stats=self.stats)
+                                rcvbuf=rcvbuf, stats=self.stats,
+                                receiver_factory=partial(make_receiver, controller=controller, space=self.handler.space))
         self.tcp = (TcpSlipTransport(host, port, self.handler.handle_batch, allow=allow_set, stats=self.stats,
                                      on_close=self.notifier.unsubscribe, max_connections=tcp_max_connections,
                                      max_per_peer=tcp_max_per_peer, idle_timeout_s=tcp_idle_timeout_s)
@@ -881,10 +884,18 @@ class OscServer:
         s = self.stats
         return self._transport_status() + [("tcp_refused", s.tcp_refused), ("tcp_idle_closed", s.tcp_idle_closed)]
 
+    def counters(self) -> dict[str, int]:
+        """Transport counters of both transports: the TCP ones in :attr:`stats`, the UDP ones in
+        the compiled receive loop (``fast_path``: messages it handled without Python)."""
+        s, udp = self.stats, self.udp.counters()
+        return {"packets": s.packets + udp.get("packets", 0), "bytes": s.bytes + udp.get("bytes", 0),
+                "denied": s.denied + udp.get("denied", 0), "fast_path": udp.get("fast", 0),
+                "replies": s.replies, "send_errors": s.send_errors}
+
     def _transport_status(self) -> list[tuple[str, object]]:
-        s = self.stats
-        return [("packets", s.packets), ("denied", s.denied), ("replies", s.replies),
-                ("send_errors", s.send_errors), ("rcvbuf", self.udp.rcvbuf)]
+        c = self.counters()
+        return [("packets", c["packets"]), ("denied", c["denied"]), ("fast_path", c["fast_path"]),
+                ("replies", c["replies"]), ("send_errors", c["send_errors"]), ("rcvbuf", self.udp.rcvbuf)]
 
     @property
     def port(self) -> int:

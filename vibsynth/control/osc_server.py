@@ -3,8 +3,11 @@
 Transports know nothing of OSC addresses: they receive packets, drop those from
 clients outside the allow-list (counted), and hand batches of ``(data, peer)`` to a
 callback on their single receive thread: after waiting for the first packet, the UDP
-thread drains whatever else is already queued in the socket (up to
-:data:`MAX_BATCH`), so the handler can coalesce moves that arrived together. ``peer.send(data)`` replies to the sender (UDP:
+thread drains whatever else is already queued in the socket (up to 256 datagrams),
+so the handler can coalesce moves that arrived together. The UDP receive loop is
+compiled (:mod:`vibsynth.control._oscfast`): it runs without the GIL and, when the
+OSC server gives it a fast path (:mod:`vibsynth.control.osc_fast`), puts the common knob
+messages straight into the engine's command ring. ``peer.send(data)`` replies to the sender (UDP:
 its address, or the configured reply port on its host; TCP: the same connection).
 
 Limits: TCP connections are bounded (:data:`TCP_MAX_CONNECTIONS` in all,
@@ -15,17 +18,16 @@ in the config, so a config that passes always starts the server.
 """
 from __future__ import annotations
 
-import errno
 import ipaddress
 import logging
-import select
 import selectors
 import socket
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
+from vibsynth.control.osc_fast import make_receiver
 from vibsynth.errors import ConfigError
 
 __all__ = [
@@ -59,10 +61,12 @@ TCP_IDLE_TIMEOUT_S = 30.0
 """A TCP connection without a complete packet for this long is closed (``osc.tcp_idle_timeout_s``)."""
 _POLL_S = 0.25
 
-MAX_BATCH = 256
 
 BatchHandler = Callable[[list], None]
 """``handler([(data, peer), ...])``, called on the receive thread."""
+
+ReceiverFactory = Callable[[int, Callable[[list], None], Any], Any]
+"""``factory(fd, on_datagrams, allow) -> receiver`` with ``run()``, ``stop()``, ``counters()``."""
 
 
 @dataclass
@@ -326,6 +330,10 @@ class UdpTransport:
         Send replies to this port on the sender's host instead of the sender's port.
     rcvbuf : int
         Requested receive buffer size in bytes (the kernel may cap it; see :attr:`rcvbuf`).
+    receiver_factory : callable, optional
+        ``factory(fd, on_datagrams, allow) -> receiver`` building the compiled receive loop
+        (:func:`vibsynth.control.osc_fast.make_receiver`; the OSC server passes one with the
+        fast path on). Default: the loop without a fast path.
     """
 
     def __init__(
@@ -338,6 +346,7 @@ class UdpTransport:
         reply_port: int | None = None,
         rcvbuf: int = DEFAULT_RCVBUF,
         stats: TransportStats | None = None,
+        receiver_factory: ReceiverFactory | None = None,
     ) -> None:
         self.host = host
         self.port = int(port)
@@ -347,6 +356,8 @@ class UdpTransport:
         self.requested_rcvbuf = rcvbuf
         self.rcvbuf = 0
         self.stats = stats or TransportStats()
+        self.receiver_factory = receiver_factory or make_receiver
+        self._receiver: Any = None
         self.sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -379,12 +390,16 @@ class UdpTransport:
         if self.sock is None:
             self.open()
         self._stop.clear()
+        assert self.sock is not None
+        self._receiver = self.receiver_factory(self.sock.fileno(), self._on_datagrams, self.allow)
         self._thread = threading.Thread(target=self._run, name="vibsynth-osc-udp", daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop the receive thread and close the socket."""
+        """Stop the receive thread (within 0.1 s) and close the socket."""
         self._stop.set()
+        if self._receiver is not None:
+            self._receiver.stop()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
@@ -408,39 +423,26 @@ class UdpTransport:
     def _run(self) -> None:
         sock = self.sock
         assert sock is not None
-        stats = self.stats
-        allow = self.allow
-        poller = select.poll()
-        poller.register(sock, select.POLLIN)
-        while not self._stop.is_set():
-            if not poller.poll(_POLL_S * 1000):
-                continue
-            batch = []
-            while len(batch) < MAX_BATCH:
-                try:
-                    data, address = sock.recvfrom(MAX_DATAGRAM)
-                except (BlockingIOError, InterruptedError):
-                    break
-                except OSError as exc:
-                    if self._stop.is_set() or exc.errno == errno.EBADF:
-                        return
-                    stats.send_errors += 1  # e.g. ECONNREFUSED reported for an earlier reply
-                    continue
-                stats.packets += 1
-                stats.bytes += len(data)
-                if allow is not None and address[0] not in allow:
-                    stats.denied += 1
-                    log.debug("OSC: dropped a packet from %s (not in osc.allow)", address[0])
-                    continue
-                reply_to = address[:2] if self.reply_port is None else (address[0], self.reply_port)
-                batch.append((data, UdpPeer(address[:2], reply_to, self)))
-            if not batch:
-                continue
-            try:
-                self.on_batch(batch)
-            except Exception:  # the receive thread must survive anything
-                stats.handler_errors += 1
-                log.exception("OSC: handler failed on a batch of %d packet(s)", len(batch))
+        receiver = self._receiver
+        if receiver is not None:
+            receiver.run()  # the compiled loop; returns after stop()
+
+    def counters(self) -> dict[str, int]:
+        """The receive loop's counters: packets, bytes, fast (handled in C), slow, denied, ..."""
+        receiver = self._receiver
+        return receiver.counters() if receiver is not None else {}
+
+    def _on_datagrams(self, items: list[tuple[bytes, tuple[str, int]]]) -> None:
+        """Datagrams the compiled loop hands to Python (in arrival order), on the receive thread."""
+        batch = []
+        for data, address in items:
+            reply_to = address if self.reply_port is None else (address[0], self.reply_port)
+            batch.append((data, UdpPeer(address, reply_to, self)))
+        try:
+            self.on_batch(batch)
+        except Exception:  # the receive thread must survive anything
+            self.stats.handler_errors += 1
+            log.exception("OSC: handler failed on a batch of %d packet(s)", len(batch))
 
 
 # ---------------------------------------------------------------------- TCP

@@ -32,6 +32,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "_core_api.h"
+
 #ifdef _WIN32
 #include <windows.h>
 #else
@@ -58,26 +60,15 @@
 #define KNOB_FADE_IN 0.01
 #define PA_OUTPUT_UNDERFLOW 0x00000004UL
 
-enum { CMD_KNOB = 1, CMD_GLIDE = 2, CMD_MUTE = 3, CMD_PANIC = 4 };
 enum { R_INTENSITY = 0, R_BALANCE = 1, R_MUTE = 2 };
-enum { PUSH_OK = 0, PUSH_RING_FULL = 1, PUSH_SCHEDULE_FULL = 2 };
-
-typedef struct {
-    int32_t kind;
-    int32_t arg;      /* knob index for CMD_KNOB, muted flag for CMD_MUTE */
-    double value;     /* knob value, or glide seconds for CMD_GLIDE */
-    double glide;     /* per-move glide (s); NaN = the channel's glide */
-    uint64_t mask;    /* channels, bit c = channel c */
-    int64_t at;       /* stream frame, -1 = as soon as possible */
-    int64_t seq;
-} cmd_t;
+typedef vs_cmd_t cmd_t;
 
 typedef struct {
     double start[MAXCH], delta[MAXCH], pos[MAXCH], len[MAXCH];
     int64_t end_frame;
 } ramps_t;
 
-typedef struct {
+typedef struct vs_core {
     PyObject_HEAD
     /* bank */
     Py_buffer sig;
@@ -691,10 +682,8 @@ static PyTypeObject CoreType = {
 };
 
 /* C producers (the OSC fast path) reach core_push through this capsule. */
-typedef struct {
-    int (*push)(Core *, cmd_t *, int64_t *);
-} core_api_t;
-static core_api_t core_api = {core_push};
+static int core_channels(Core *c) { return c->channels; }
+static vs_core_api_t core_api = {core_push, core_channels};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_core", "vibsynth real-time core", -1, NULL};
 
@@ -710,6 +699,6 @@ PyMODINIT_FUNC PyInit__core(void) {
     PyModule_AddIntConstant(m, "CMD_PANIC", CMD_PANIC);
     PyModule_AddIntConstant(m, "MAX_CHANNELS", MAXCH);
     PyModule_AddIntConstant(m, "DRAIN_MAX", DRAIN_MAX);
-    PyModule_AddObject(m, "_C_API", PyCapsule_New(&core_api, "vibsynth.engine._core._C_API", NULL));
+    PyModule_AddObject(m, "_C_API", PyCapsule_New(&core_api, VS_CORE_CAPSULE, NULL));
     return m;
 }

@@ -1,0 +1,33 @@
+/*
+ * What other compiled modules (the OSC fast path) need of the real-time core: the command
+ * layout and the producer entry point, reached through the capsule
+ * "vibsynth.engine._core._C_API" (see vibsynth/engine/_core.c).
+ */
+#ifndef VIBSYNTH_CORE_API_H
+#define VIBSYNTH_CORE_API_H
+#include <stdint.h>
+
+enum { CMD_KNOB = 1, CMD_GLIDE = 2, CMD_MUTE = 3, CMD_PANIC = 4 };
+enum { PUSH_OK = 0, PUSH_RING_FULL = 1, PUSH_SCHEDULE_FULL = 2 };
+
+typedef struct {
+    int32_t kind;
+    int32_t arg;      /* knob index for CMD_KNOB (0 intensity, 1 balance), muted flag for CMD_MUTE */
+    double value;     /* knob value, or glide seconds for CMD_GLIDE */
+    double glide;     /* per-move glide (s); NaN = the channel's glide */
+    uint64_t mask;    /* channels, bit c = channel c */
+    int64_t at;       /* stream frame, -1 = as soon as possible */
+    int64_t seq;
+} vs_cmd_t;
+
+struct vs_core;
+
+typedef struct {
+    /* Any thread, GIL not needed. Returns PUSH_*; *seq_out gets the sequence number. */
+    int (*push)(struct vs_core *core, vs_cmd_t *cmd, int64_t *seq_out);
+    /* Channels of the core. */
+    int (*channels)(struct vs_core *core);
+} vs_core_api_t;
+
+#define VS_CORE_CAPSULE "vibsynth.engine._core._C_API"
+#endif
