@@ -460,6 +460,8 @@ SCHEMA: dict[str, Spec] = {
     "knobs.balance_max": number(0, 10, unit="(knob units)"),
     "knobs.initial_intensity": number(0, 1),
     "knobs.initial_balance": number(-10, 10, unit="(knob units)"),
+    "knobs.schedule_capacity": number(1, 1_000_000, integer=True,
+                                      doc="most timetagged commands waiting at once; more are refused"),
     # actuator
     "actuator.profile": string(nullable=True, pattern=_PROFILE_NAME, what="a profile name"),
     "actuator.response": _points("Hz", 0, True, -60, 60, 1, True, "explicit response points"),

@@ -28,7 +28,7 @@ from vibsynth.dsp.basis import Basis
 from vibsynth.engine.actuator import ActuatorResponse
 from vibsynth.engine.bank import BankSpec, load_or_build
 from vibsynth.engine.commands import SetMute
-from vibsynth.engine.engine import Engine
+from vibsynth.engine.engine import DEFAULT_SCHEDULE_CAPACITY, Engine
 from vibsynth.engine.outputs import NullOutput, OutputBackend, SoundDeviceOutput, WavOutput
 from vibsynth.engine.supervisor import STREAMING, ExitGuard, hard_exit
 from vibsynth.errors import ConfigError, DeviceError, ParameterError, VibsynthError
@@ -102,6 +102,7 @@ def build_engine(
             mute_fade_s=float(knobs["mute_fade_ms"]) / 1000.0, limiter_ceiling=float(knobs["limiter_ceiling"]),
             initial_intensity=float(knobs.get("initial_intensity", 0.0)),
             initial_balance=float(knobs.get("initial_balance", 0.0)),
+            schedule_capacity=int(knobs.get("schedule_capacity", DEFAULT_SCHEDULE_CAPACITY)),
             max_block=block if 0 < block < bank.n_samples else 1024,
         )
     except ParameterError as exc:

@@ -189,3 +189,31 @@ def test_truncated_and_garbage_datagrams_never_take_the_fast_path(served):
     k = knobs(engine)[0][0]
     # a mutated byte may still form a valid in-range message; only such messages may act
     assert 0.0 <= k <= 1.0 and server.stats.handler_errors == 0
+
+
+def test_bundles_beyond_the_schedule_cap_get_an_error_and_change_nothing(bank):
+    engine = Engine(bank, channels=1, glide_s=0.0, max_block=512, schedule_capacity=20)
+    ctl = Controller(engine)
+    server = osc.OscServer(ctl, port=0)
+    server.start()
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.settimeout(2.0)
+    try:
+        when = time.time() + 5.0
+        tag = ((int(when) + 2208988800) << 32) | int((when % 1) * (1 << 32))
+        # out of time order: later tags first
+        for k in range(25):
+            bundle = encode_bundle(tag - k * (1 << 32) // 100, [encode_message("/vibsynth/intensity", (0.5 - k / 100,), "f")])
+            client.sendto(bundle, ("127.0.0.1", server.port))
+        replies = roundtrip(client, server, None)
+        errors = [r for r in replies if r.address.endswith("/error")]
+        assert len(errors) == 5 and all("schedule_capacity" in r.args[1] for r in errors)
+        assert engine.stats.pending == 20 and engine.stats.schedule_full == 5
+        assert ctl.error_counts.get("osc.schedule_full") == 5
+        # the target is the latest-timed accepted value (k = 0), whatever the arrival order
+        assert ctl.get("intensity") == pytest.approx(0.5)
+        status = dict(server.handler.status_pairs())
+        assert status["scheduled_pending"] == 20 and status["schedule_full"] == 5
+    finally:
+        client.close()
+        server.stop()

@@ -52,7 +52,7 @@ from vibsynth.control.osc_server import (
     resolve_allow_list,
 )
 from vibsynth.control.osc_workers import Notifier, PeerLike, SyncWorker, setter_message
-from vibsynth.errors import ConfigError, ParameterError, PresetError, VibsynthError
+from vibsynth.errors import ConfigError, ParameterError, PresetError, ScheduleFullError, VibsynthError
 
 __all__ = [
     "OscArgumentError",
@@ -519,6 +519,8 @@ class OscHandler:
                 self._error(peer, msg.address, f"{method}: {exc}", "osc.bad_arguments")
             except PresetError as exc:
                 self._error(peer, msg.address, str(exc), "osc.preset")
+            except ScheduleFullError as exc:
+                self._error(peer, msg.address, str(exc), "osc.schedule_full")
             except ParameterError as exc:
                 self._error(peer, msg.address, str(exc), "osc.invalid_value")
             except VibsynthError as exc:
@@ -707,6 +709,8 @@ class OscHandler:
             ("load", float(_engine_stat(engine, ("render_load", "load_avg", "load", "cpu_load"), -1.0))),
             ("load_peak", float(_engine_stat(engine, ("load_peak",), -1.0))),
             ("late_commands", int(_engine_stat(engine, ("late_commands",), -1))),
+            ("scheduled_pending", int(_engine_stat(engine, ("pending",), -1))),
+            ("schedule_full", int(_engine_stat(engine, ("schedule_full",), -1))),
             ("uptime", float(time.monotonic() - ctl.started_at)),
             ("frame", int(_engine_stat(engine, ("frame_position",), -1))),
             ("messages", self.stats.messages),
