@@ -523,3 +523,46 @@ def test_stalled_tcp_clients_do_not_lock_out_others(limits_serve):
     status = _dump_status(port, dump)
     print(f"\nTCP: refused {status['tcp_refused']}, closed idle {status['tcp_idle_closed']}")
     assert int(status["tcp_refused"]) >= 6 and int(status["tcp_idle_closed"]) >= 4
+
+
+# ---------------------------------------------------------------------- issue 12: scheduled-bundle flood
+def _underflows_over(client: "Client", seconds: float) -> int:
+    before = client.status()["underflows"]
+    time.sleep(seconds)
+    return client.status()["underflows"] - before
+
+
+@REALTIME
+def test_hundred_thousand_timetagged_bundles(jack_serve):
+    """100,000 bundles inside the horizon: 10,000 wait (the default cap), the rest get an error
+    reply each, and the audio keeps its quiet-baseline underflow count (was >1000 underflows)."""
+    port = jack_serve
+    client = Client(port)  # queries; the flood comes from its own socket, which the error replies fill
+    flood = Client(port)
+    try:
+        baseline = _underflows_over(client, 3.0)
+        before = client.status()
+        when = time.time() + 9.8  # inside the 10 s horizon on arrival; fires after the check
+        sent = 0
+        t0 = time.perf_counter()
+        for k in range(100_000):
+            tag = unix_to_ntp(when - k * 1e-5)  # later tags first: out of time order
+            flood.sock.sendto(encode_bundle(tag, [encode_message("/vibsynth/intensity", (0.5,), "f")]), client.target)
+            sent += 1
+            if k % 100 == 99:
+                time.sleep(0.005)  # ~20k/s: within what the socket buffer and the handler absorb
+        flood_s = time.perf_counter() - t0
+        client.request("/vibsynth/sync", 1, expect="/vibsynth/synced", timeout=30.0)
+        during = client.status()
+        loaded = during["underflows"] - before["underflows"]
+    finally:
+        client.close()
+        flood.close()
+    refused = during["schedule_full"] - before.get("schedule_full", 0)
+    print(f"\n100k bundles in {flood_s:.1f} s: pending {during['scheduled_pending']}, refused {refused}, "
+          f"underflows {loaded} during vs {baseline} in 3 s quiet")
+    assert during["scheduled_pending"] == 10_000
+    bundles = during["scheduled"] - before["scheduled"]
+    assert bundles == sent  # none lost in the socket
+    assert refused == sent - 10_000
+    assert loaded <= baseline + MAX_UNDERFLOWS
