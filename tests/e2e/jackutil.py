@@ -100,7 +100,9 @@ class JackCapture:
         import jack
 
         JackCapture._count += 1
-        self.client = jack.Client(f"{name}-{os.getpid()}-{JackCapture._count}", no_start_server=True)
+        # The server named now (tests switch servers within one process): explicit, not cached.
+        self.client = jack.Client(f"{name}-{os.getpid()}-{JackCapture._count}", no_start_server=True,
+                                  servername=os.environ.get("JACK_DEFAULT_SERVER") or None)
         self.rate = int(self.client.samplerate)
         self.inports = [self.client.inports.register(f"in_{k + 1}") for k in range(n_ports)]
         self.data = np.zeros((int(round(seconds * self.rate)), n_ports), dtype=np.float32)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.e2e.jackutil import JackCapture, e2e_required, portaudio_output_ports
+from tests.e2e.jackutil import e2e_required
 from vibsynth.control.osc_codec import Message, decode_packet, encode_message
 
 pytestmark = pytest.mark.e2e
@@ -205,17 +205,56 @@ class Serve:
             self.proc.wait()
 
 
+_RMS_SCRIPT = r"""
+import sys, threading
+import numpy as np
+import jack
+
+seconds = float(sys.argv[1])
+client = jack.Client("vibsynth-rms", no_start_server=True)
+sources = sorted(p.name for p in client.get_ports(name_pattern="PortAudio", is_audio=True, is_output=True))
+if not sources:
+    print(0.0)
+    sys.exit(0)
+port = client.inports.register("in_1")
+n = int(round(seconds * client.samplerate))
+data = np.zeros(n, dtype=np.float32)
+pos = [0]
+done = threading.Event()
+
+
+@client.set_process_callback
+def process(frames):
+    if done.is_set():
+        return
+    k = min(frames, n - pos[0])
+    data[pos[0]:pos[0] + k] = port.get_array()[:k]
+    pos[0] += k
+    if pos[0] >= n:
+        done.set()
+
+
+client.activate()
+client.connect(sources[0], port)
+ok = done.wait(seconds + 5.0)
+client.deactivate()
+client.close()
+print(float(np.sqrt(np.mean(data.astype(np.float64) ** 2))) if ok else -1.0)
+"""
+
+
 def rms_of_serve_output(seconds: float = 0.3) -> float:
-    """RMS of serve's first JACK output port over ``seconds`` (0.0 if it has no port yet)."""
-    with JackCapture(seconds) as cap:
-        sources = portaudio_output_ports(cap.client)
-        if not sources:
-            return 0.0
-        cap.connect(sources[:1])
-        cap.arm()
-        assert cap.wait(seconds + 5.0), "JACK capture did not complete"
-        x = cap.data[:, 0].astype(np.float64)
-    return float(np.sqrt(np.mean(x * x)))
+    """RMS of serve's first JACK output port over ``seconds`` (0.0 if it has no port yet).
+
+    Captured from a separate process: earlier tests in this process may hold PortAudio's JACK
+    client on another server, and libjack's per-process state then hides this server's ports.
+    """
+    done = subprocess.run([sys.executable, "-c", _RMS_SCRIPT, str(seconds)], capture_output=True, text=True,
+                          timeout=seconds + 20.0, env=dict(os.environ))
+    assert done.returncode == 0, done.stderr[-2000:]
+    value = float(done.stdout.strip().splitlines()[-1])
+    assert value >= 0.0, "JACK capture did not complete"
+    return value
 
 
 @pytest.fixture
