@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 
 from tests.e2e.jackutil import e2e_required
-from vibsynth.control.osc_codec import Message, decode_packet, encode_message
+from tests.e2e.oscclient import OscClient as Osc, free_udp_port
 
 pytestmark = pytest.mark.e2e
 
@@ -110,42 +110,6 @@ class JackServer:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-
-
-class Osc:
-    """A UDP OSC client of the served port."""
-
-    def __init__(self, port: int) -> None:
-        self.target = ("127.0.0.1", port)
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-
-    def send(self, address: str, *args: object) -> None:
-        self.sock.sendto(encode_message(address, args), self.target)
-
-    def request(self, address: str, *args: object, expect: str, timeout: float = 2.0) -> Message:
-        self.send(address, *args)
-        self.sock.settimeout(timeout)
-        while True:
-            msg = decode_packet(self.sock.recvfrom(65536)[0])
-            if msg.address == expect:
-                return msg
-
-    def status(self) -> dict:
-        msg = self.request("/vibsynth/status", expect="/vibsynth/status.reply")
-        return dict(zip(msg.args[::2], msg.args[1::2]))
-
-    def texture(self) -> tuple[float, float]:
-        return tuple(self.request("/vibsynth/get", "texture", expect="/vibsynth/texture").args)  # type: ignore[return-value]
-
-    def close(self) -> None:
-        self.sock.close()
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Serve:

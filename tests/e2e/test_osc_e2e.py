@@ -23,9 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vibsynth.control.osc_codec import Message, decode_packet, encode_bundle, encode_message, unix_to_ntp
+from vibsynth.control.osc_codec import decode_packet, encode_bundle, encode_message, unix_to_ntp
 
 from tests.e2e.jackutil import REALTIME  # noqa: E402
+from tests.e2e.oscclient import OscClient as Client, free_udp_port  # noqa: E402
 
 pytestmark = pytest.mark.e2e
 
@@ -61,40 +62,6 @@ def jack_available() -> bool:
     except ImportError:
         return False
     return jack_server_available()[0]
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Client:
-    """A UDP socket talking to the server (replies come back to it unless reply_port is set)."""
-
-    def __init__(self, port: int) -> None:
-        self.target = ("127.0.0.1", port)
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-
-    def send(self, address: str, *args, types: str | None = None) -> None:
-        self.sock.sendto(encode_message(address, args, types), self.target)
-
-    def request(self, address: str, *args, expect: str, timeout: float = 5.0, types: str | None = None) -> Message:
-        self.send(address, *args, types=types)
-        self.sock.settimeout(timeout)
-        while True:
-            msg = decode_packet(self.sock.recvfrom(65536)[0])
-            if msg.address == expect:
-                return msg
-
-    def status(self) -> dict:
-        msg = self.request("/vibsynth/status", expect="/vibsynth/status.reply")
-        return dict(zip(msg.args[::2], msg.args[1::2]))
-
-    def close(self) -> None:
-        self.sock.close()
 
 
 def _socket_ready(port: int) -> bool:
@@ -526,7 +493,8 @@ def test_stalled_tcp_clients_do_not_lock_out_others(limits_serve):
 
 
 # ---------------------------------------------------------------------- issue 12: scheduled-bundle flood
-def _underflows_over(client: "Client", seconds: float) -> int:
+def _underflows_quiet(client: Client, seconds: float) -> int:
+    """Underflows over ``seconds`` with no control traffic (the baseline)."""
     before = client.status()["underflows"]
     time.sleep(seconds)
     return client.status()["underflows"] - before
@@ -540,7 +508,7 @@ def test_hundred_thousand_timetagged_bundles(jack_serve):
     client = Client(port)  # queries; the flood comes from its own socket, which the error replies fill
     flood = Client(port)
     try:
-        baseline = _underflows_over(client, 3.0)
+        baseline = _underflows_quiet(client, 3.0)
         before = client.status()
         when = time.time() + 9.8  # inside the 10 s horizon on arrival; fires after the check
         sent = 0

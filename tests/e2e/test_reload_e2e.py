@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from tests.e2e.jackutil import REALTIME, e2e_required, jack_server_available
-from vibsynth.control.osc_codec import decode_packet, encode_message
+from tests.e2e.oscclient import OscClient as Osc, free_udp_port
 
 pytestmark = pytest.mark.e2e
 
@@ -35,41 +35,8 @@ SLACK = 3
 START_TIMEOUT_S = 180.0
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Osc:
-    """A UDP client of the service; replies come back to its own socket."""
-
-    def __init__(self, port: int) -> None:
-        self.target = ("127.0.0.1", port)
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-
-    def send(self, address: str, *args: object) -> None:
-        self.sock.sendto(encode_message(address, args), self.target)
-
-    def request(self, address: str, *args: object, expect: str, timeout: float = 5.0) -> tuple:
-        self.send(address, *args)
-        self.sock.settimeout(timeout)
-        while True:
-            msg = decode_packet(self.sock.recvfrom(65536)[0])
-            if msg.address == expect:
-                return msg.args
-
-    def status(self) -> dict:
-        args = self.request("/vibsynth/status", expect="/vibsynth/status.reply")
-        return dict(zip(args[::2], args[1::2]))
-
-    def close(self) -> None:
-        self.sock.close()
-
-
 def _start(tmp_path: Path, presets: Path) -> tuple[subprocess.Popen, int, Path]:
-    port = _free_udp_port()
+    port = free_udp_port()
     config = tmp_path / "vibsynth.yaml"
     config.write_text(f"version: 1\nosc:\n  port: {port}\n", encoding="utf-8")
     log_path = tmp_path / "serve.log"
@@ -151,7 +118,7 @@ def test_a_50mb_file_in_the_preset_folder_costs_no_underflows(tmp_path):
         deadline = time.monotonic() + 5.0
         while True:
             client.send("/vibsynth/preset", "added")
-            if client.request("/vibsynth/get", "preset", expect="/vibsynth/preset") == ("added",):
+            if client.request("/vibsynth/get", "preset", expect="/vibsynth/preset").args == ("added",):
                 break
             assert time.monotonic() < deadline, "a preset added next to the junk file was not picked up"
             time.sleep(0.2)
