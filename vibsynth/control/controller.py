@@ -126,6 +126,13 @@ def check_range(name: str, value: float, low: float, high: float) -> float:
     return number
 
 
+def _notify(listeners: Sequence[Listener], events: Sequence[KnobEvent]) -> None:
+    """Call every listener with every event (outside the controller's lock)."""
+    for listener in listeners:
+        for event in events:
+            listener(event)
+
+
 class Controller:
     """Validated, thread-safe control of an engine.
 
@@ -193,9 +200,7 @@ class Controller:
             for c in chans:
                 self._set_if_latest(c, field, value, frame, source, events)
             listeners = list(self._listeners) if events else []
-        for listener in listeners:
-            for event in events:
-                listener(event)
+        _notify(listeners, events)
 
     def _set_if_latest(self, c: int, field: str, value: object, frame: int, source: str,
                        events: list[KnobEvent]) -> None:
@@ -224,9 +229,7 @@ class Controller:
             for name, c, value in updates:
                 self._set_if_latest(c, name, value, frame, source, events)
             listeners = list(self._listeners) if events else []
-        for listener in listeners:
-            for event in events:
-                listener(event)
+        _notify(listeners, events)
 
     def _update(self, chans: tuple[int, ...], field: str, value: object, source: str) -> None:
         """Record a state change that is not an engine command (e.g. the preset name)."""
@@ -236,9 +239,7 @@ class Controller:
                 self._state[c] = replace(self._state[c], **{field: value})
                 events.append(KnobEvent(c, _EVENT_NAMES.get(field, field), value, source))
             listeners = list(self._listeners)
-        for listener in listeners:
-            for event in events:
-                listener(event)
+        _notify(listeners, events)
 
     def count_error(self, kind: str) -> None:
         """Count a rejected input (adapters call this; shown in status)."""

@@ -118,9 +118,9 @@ class EngineStats:
     def underflows(self) -> int:
         return self._core.underflows
 
-    @underflows.setter
-    def underflows(self, value: int) -> None:
-        self._core.add_underflows(int(value) - self._core.underflows)
+    def count_underflow(self) -> None:
+        """Count one underflow seen by an output other than the compiled callback (e.g. the null clock)."""
+        self._core.add_underflows(1)
 
     def take_peak(self) -> float:
         """Peak load since the last call (and reset it)."""

@@ -134,7 +134,7 @@ class OutputBackend:
 
     def _count_underflow(self) -> None:
         self.stats.underflows += 1
-        self.engine.stats.underflows = self.stats.underflows
+        self.engine.stats.count_underflow()
 
 
 # ---------------------------------------------------------------------- sounddevice
