@@ -1,7 +1,7 @@
 """Build the compiled parts; everything else is in pyproject.toml.
 
 * ``vibsynth.engine._core``: the real-time core (callback, mix, command ring, scheduler).
-* ``vibsynth.control._oscfast``: the OSC UDP receive loop and its fast path.
+* ``vibsynth.control.osc._fast``: the OSC UDP receive loop and its fast path.
 """
 import sys
 
@@ -26,7 +26,7 @@ setup(
     ext_modules=[
         Extension("vibsynth.engine._core", ["vibsynth/engine/_core.c"], depends=["vibsynth/engine/_core_api.h"]),
         Extension(
-            "vibsynth.control._oscfast", ["vibsynth/control/_oscfast.c"], depends=["vibsynth/engine/_core_api.h"],
+            "vibsynth.control.osc._fast", ["vibsynth/control/osc/_fast.c"], depends=["vibsynth/engine/_core_api.h"],
             libraries=["ws2_32"] if sys.platform == "win32" else [],
         ),
     ],

@@ -22,11 +22,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from vibsynth import vbt  # noqa: E402
+from vibsynth.app import vbt_render  # noqa: E402
 from vibsynth.dsp.basis import band_powers_from_psd, to_db  # noqa: E402
 from vibsynth.dsp.codec import Quantizer, encode_trajectory, quality  # noqa: E402
 from vibsynth.dsp.synthesis import synthesize  # noqa: E402
-from vibsynth.io import default_basis, read_psd_table  # noqa: E402
+from vibsynth.formats import vbt
+from vibsynth.formats.basis_file import default_basis
+from vibsynth.formats.psd import read_psd_table  # noqa: E402
 
 HATT = ROOT.parent / "shared" / "datasets" / "hatt-psd" / "psd.csv.gz"
 
@@ -69,7 +71,7 @@ def run_case(name, fs, x, basis, bits, cache):
     t_enc = time.perf_counter() - t0
     t0 = time.perf_counter()
     dec = vbt.decode_bytes(data)
-    out = vbt.render(dec.trajectory, basis=basis, overrides={"bank.cache_dir": cache})
+    out = vbt_render.render(dec.trajectory, basis=basis, overrides={"bank.cache_dir": cache})
     t_dec = time.perf_counter() - t0
     qual = quality(x, out.signal, fs=fs, basis=basis, offset_db=out.offset_db)
     duration = x.size / fs

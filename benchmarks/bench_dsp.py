@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 from vibsynth.dsp.analysis import analyze  # noqa: E402
 from vibsynth.dsp.filterbank import band_powers  # noqa: E402
 from vibsynth.dsp.synthesis import synthesize, synthesize_iterative  # noqa: E402
-from vibsynth.io import default_basis  # noqa: E402
+from vibsynth.formats.basis_file import default_basis  # noqa: E402
 
 
 def _median_time(fn, repeats: int) -> tuple[float, object]:

@@ -29,12 +29,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from vibsynth.config import load_config  # noqa: E402
 from vibsynth.control.controller import Controller  # noqa: E402
 from vibsynth.engine.bank import BankSpec, load_or_build  # noqa: E402
 from vibsynth.engine.commands import SetKnob  # noqa: E402
 from vibsynth.engine.engine import Engine  # noqa: E402
-from vibsynth.io import default_basis  # noqa: E402
+from vibsynth.formats.basis_file import default_basis  # noqa: E402
 
 FS = 48000
 

@@ -20,15 +20,13 @@ Prints a table and writes ``benchmarks/results/midi.json``.
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import json
 import os
 import sys
-import threading
 import time
 from pathlib import Path
 from types import SimpleNamespace
-
-import faulthandler
 
 import numpy as np
 
@@ -39,12 +37,12 @@ sys.path.insert(0, str(ROOT))
 import jack  # noqa: E402
 import mido  # noqa: E402
 
-from vibsynth.config import default_config_data  # noqa: E402
-from vibsynth.control import midi  # noqa: E402
 from vibsynth.control.controller import Controller  # noqa: E402
+from vibsynth.control.midi import adapter as midi  # noqa: E402
 from vibsynth.engine.bank import BankSpec, build_bank  # noqa: E402
 from vibsynth.engine.engine import Engine  # noqa: E402
-from vibsynth.io import default_basis  # noqa: E402
+from vibsynth.formats.basis_file import default_basis  # noqa: E402
+from vibsynth.settings.config import default_config_data  # noqa: E402
 
 
 def main() -> int:

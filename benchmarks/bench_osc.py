@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from tests.e2e.test_osc_e2e import Client, jack_available, start_serve, stop_serve  # noqa: E402
-from vibsynth.control.osc_codec import encode_message  # noqa: E402
+from vibsynth.control.osc.codec import encode_message  # noqa: E402
 
 
 def _percentile(values: list[float], q: float) -> float:

@@ -122,7 +122,7 @@ def band_gains() -> tuple[list[float], str]:
     """Linear gains of the 30 band-passes approximating vibsynth's mean spectrum M (max 1)."""
     try:
         sys.path.insert(0, str(ROOT))
-        from vibsynth.io import default_basis
+        from vibsynth.formats.basis_file import default_basis
 
         basis = default_basis()
         centres = np.asarray(basis.centres_hz, dtype=float)

@@ -14,9 +14,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from vibsynth.fitting import fit_default_basis  # noqa: E402
-from vibsynth.io import save_basis  # noqa: E402
+from vibsynth.research.basis_fit import fit_default_basis  # noqa: E402
+
 from vibsynth.cli.basis import summary  # noqa: E402
+from vibsynth.formats.basis_file import save_basis  # noqa: E402
 
 
 def main() -> int:

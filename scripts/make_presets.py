@@ -34,11 +34,13 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from vibsynth.research.basis_fit import HATT_CITATION, HATT_TERMS  # noqa: E402
+
 from vibsynth.dsp.basis import band_powers_from_psd, to_db  # noqa: E402
 from vibsynth.dsp.intensity import DEFAULT_RANGE_DB, intensity_response  # noqa: E402
-from vibsynth.fitting import HATT_CITATION, HATT_TERMS  # noqa: E402
-from vibsynth.io import default_basis, read_psd_table  # noqa: E402
-from vibsynth.presets import Preset, parse_preset, preset_to_yaml  # noqa: E402
+from vibsynth.formats.basis_file import default_basis
+from vibsynth.formats.psd import read_psd_table  # noqa: E402
+from vibsynth.settings.presets import Preset, parse_preset, preset_to_yaml  # noqa: E402
 
 DEFAULT_PSD = ROOT.parent / "shared" / "datasets" / "hatt-psd" / "psd.csv.gz"
 OUT_DIR = ROOT / "vibsynth" / "data" / "presets"
@@ -184,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         print(f"make_presets: {len(files)} presets up to date")
         return 0
-    from vibsynth.io import atomic_write_text
+    from vibsynth.formats.files import atomic_write_text
 
     args.out.mkdir(parents=True, exist_ok=True)
     for old in args.out.glob("*.yaml"):

@@ -18,7 +18,7 @@ def rng() -> np.random.Generator:
 
 @pytest.fixture(scope="session")
 def basis():
-    from vibsynth.io import default_basis
+    from vibsynth.formats.basis_file import default_basis
 
     return default_basis()
 

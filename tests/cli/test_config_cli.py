@@ -6,7 +6,7 @@ import json
 import pytest
 
 from vibsynth.cli import main
-from vibsynth.config import ENV_VARS
+from vibsynth.settings.config import ENV_VARS
 
 
 @pytest.fixture(autouse=True)

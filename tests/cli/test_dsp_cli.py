@@ -11,7 +11,7 @@ import pytest
 from scipy.io import wavfile
 
 from vibsynth.cli import main
-from vibsynth.io import load_basis
+from vibsynth.formats.basis_file import load_basis
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -56,7 +56,7 @@ def test_analyze_table_and_csv_input(tmp_path, capsys, rng):
 
 def test_basis_fit_from_a_folder_of_recordings(tmp_path, capsys, basis, rng):
     from vibsynth.dsp.synthesis import synthesize
-    from vibsynth.io import write_wav
+    from vibsynth.formats.recordings import write_wav
 
     folder = tmp_path / "recs"
     for i in range(12):

@@ -2,18 +2,17 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from vibsynth.cli import main
-from vibsynth.config import ENV_VARS
 from vibsynth.dsp.analysis import analyze
 from vibsynth.dsp.intensity import knob_to_level_db
 from vibsynth.dsp.synthesis import synthesize
-from vibsynth.io import read_recording, write_wav
-from vibsynth.presets import load_preset
+from vibsynth.formats.recordings import read_recording, write_wav
+from vibsynth.settings.config import ENV_VARS
+from vibsynth.settings.presets import load_preset
 
 FS = 8000.0
 # A small, fast bank: 8 kHz, 2 s loops, 25 levels over [-2, 2]; no disk cache.
@@ -193,7 +192,7 @@ def test_play_to_wav_renders_the_preset(capsys, tmp_path, basis):
     assert code == 0, err
     x = read_recording(out_wav).samples
     assert x.size == int(2 * FS) and np.max(np.abs(x)) <= 0.891 + 1e-6
-    from vibsynth.presets import PresetLibrary, shipped_presets_dir
+    from vibsynth.settings.library import PresetLibrary, shipped_presets_dir
 
     brick = PresetLibrary(shipped_presets_dir(), None).get("brick")
     result = analyze(x[int(0.5 * FS):], fs=FS, basis=basis, ceiling_db=-40.0, range_db=40.0)

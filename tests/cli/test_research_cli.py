@@ -8,7 +8,7 @@ import pytest
 
 from vibsynth.cli import main
 from vibsynth.dsp.synthesis import synthesize
-from vibsynth.io import write_wav
+from vibsynth.formats.recordings import write_wav
 
 FS = 2800.0
 

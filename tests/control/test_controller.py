@@ -10,7 +10,7 @@ from vibsynth.control.controller import Controller
 from vibsynth.engine.bank import BankSpec, build_bank
 from vibsynth.engine.engine import Engine
 from vibsynth.errors import ScheduleFullError
-from vibsynth.io import default_basis
+from vibsynth.formats.basis_file import default_basis
 
 
 @pytest.fixture(scope="module")

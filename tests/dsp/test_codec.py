@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from vibsynth.dsp.basis import to_db
 from vibsynth.dsp.codec import (
     Quantizer,
     decode_stationary,
@@ -13,7 +14,6 @@ from vibsynth.dsp.codec import (
     quality,
 )
 from vibsynth.dsp.filterbank import band_powers
-from vibsynth.dsp.basis import to_db
 from vibsynth.dsp.intensity import intensity_level_db
 from vibsynth.dsp.synthesis import synthesize
 from vibsynth.errors import ParameterError

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vibsynth.fitting import HATT_CITATION, fit_default_basis
+from vibsynth.research.basis_fit import HATT_CITATION, fit_default_basis
 
 
 @pytest.mark.shared

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import socket
 
-from vibsynth.control.osc_codec import Message, decode_packet, encode_message
+from vibsynth.control.osc.codec import Message, decode_packet, encode_message
 
 __all__ = ["OscClient", "free_udp_port"]
 

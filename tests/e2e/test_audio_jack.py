@@ -16,18 +16,20 @@ import pytest
 from scipy.optimize import nnls
 from scipy.signal import fftconvolve
 
-from tests.e2e.jackutil import JackCapture, portaudio_output_ports
-from vibsynth.config import load_config
+from tests.e2e.jackutil import (
+    REALTIME,  # noqa: E402
+    JackCapture,
+    portaudio_output_ports,
+)
+from vibsynth.app.service import build_engine
 from vibsynth.dsp.analysis import analyze
 from vibsynth.dsp.basis import normalise_db
 from vibsynth.dsp.intensity import knob_to_level_db
 from vibsynth.engine.commands import SetKnob, SetMute
 from vibsynth.engine.engine import Engine
 from vibsynth.engine.outputs import SoundDeviceOutput
-from vibsynth.io import default_basis
-from vibsynth.service import build_engine
-
-from tests.e2e.jackutil import REALTIME  # noqa: E402
+from vibsynth.formats.basis_file import default_basis
+from vibsynth.settings.config import load_config
 
 pytestmark = pytest.mark.e2e
 

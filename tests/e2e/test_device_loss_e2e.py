@@ -29,7 +29,8 @@ import numpy as np
 import pytest
 
 from tests.e2e.jackutil import e2e_required
-from tests.e2e.oscclient import OscClient as Osc, free_udp_port
+from tests.e2e.oscclient import OscClient as Osc
+from tests.e2e.oscclient import free_udp_port
 
 pytestmark = pytest.mark.e2e
 

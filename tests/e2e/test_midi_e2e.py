@@ -98,12 +98,12 @@ RECEIVER = textwrap.dedent("""
     import argparse, sys, time
     import numpy as np
     from types import SimpleNamespace
-    from vibsynth.config import default_config_data
+    from vibsynth.settings.config import default_config_data
     from vibsynth.control import midi
     from vibsynth.control.controller import Controller
     from vibsynth.engine.bank import BankSpec, build_bank
     from vibsynth.engine.engine import Engine
-    from vibsynth.io import default_basis
+    from vibsynth.formats import default_basis
 
     fs, seconds, out_path = 8000.0, float(sys.argv[1]), sys.argv[2]
     engine = Engine(build_bank(default_basis(), BankSpec(fs=fs, loop_seconds=1.0, levels=15)), channels=1,
@@ -157,7 +157,7 @@ def test_virtual_input_notes_and_ccs_change_the_output(jack_env, tmp_path):
     # the balance change is audible as a shift of energy to high frequencies
     from vibsynth.dsp.basis import to_db
     from vibsynth.dsp.filterbank import band_power_frames
-    from vibsynth.io import default_basis
+    from vibsynth.formats.basis_file import default_basis
 
     basis = default_basis()
     t1 = lambda a, b: float(basis.scores(to_db(band_power_frames(x[int(a * fs):int(b * fs)].astype(float), fs=fs)))[:, 0].mean())  # noqa: E731,E501

@@ -23,10 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vibsynth.control.osc_codec import decode_packet, encode_bundle, encode_message, unix_to_ntp
-
 from tests.e2e.jackutil import REALTIME  # noqa: E402
-from tests.e2e.oscclient import OscClient as Client, free_udp_port  # noqa: E402
+from tests.e2e.oscclient import OscClient as Client  # noqa: E402
+from tests.e2e.oscclient import free_udp_port
+from vibsynth.control.osc.codec import decode_packet, encode_bundle, encode_message, unix_to_ntp
 
 pytestmark = pytest.mark.e2e
 
@@ -446,7 +446,7 @@ def _tcp_connect(port: int, source: str) -> socket.socket:
 
 
 def _tcp_ping(conn: socket.socket, value: int) -> bool:
-    from vibsynth.control.osc_server import SlipDecoder, slip_encode
+    from vibsynth.control.osc.transport import SlipDecoder, slip_encode
 
     conn.settimeout(5.0)
     try:

@@ -12,8 +12,6 @@ from vibsynth.engine.actuator import ActuatorResponse
 from vibsynth.engine.bank import BankSpec, build_bank, cache_path, load_or_build
 from vibsynth.errors import ConfigError, ParameterError
 
-from .conftest import SMALL_SPEC
-
 
 def test_shape_dtype_and_grid(small_bank):
     assert small_bank.signals.dtype == np.float32

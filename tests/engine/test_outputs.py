@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from scipy.io import wavfile
 
-from vibsynth.config import load_config
+from vibsynth.app.service import open_output
 from vibsynth.engine import outputs
 from vibsynth.engine.engine import Engine
 from vibsynth.engine.outputs import NullOutput, SoundDeviceOutput, WavOutput, resolve_device
 from vibsynth.errors import DeviceError, ParameterError
-from vibsynth.service import open_output
+from vibsynth.settings.config import load_config
 
 
 def test_null_output_is_paced_by_the_clock(small_bank):
@@ -149,7 +149,7 @@ def test_serve_cli_exit_codes(no_portaudio, tmp_path, capsys):
 
 def _has_osc() -> bool:
     try:
-        import vibsynth.control.osc  # noqa: F401
+        import vibsynth.control.osc.server  # noqa: F401
     except ImportError:
         return False
     return True

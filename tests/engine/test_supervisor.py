@@ -486,8 +486,8 @@ def test_a_stream_is_closed_through_its_own_library_only_if_it_stopped(sd, world
 
 # ---------------------------------------------------------------------- what users see
 def test_status_line_and_osc_status_say_device_lost_with_the_reason(small_bank, sd, world):
+    from vibsynth.app.service import status_line
     from vibsynth.control.controller import Controller
-    from vibsynth.service import status_line
 
     clock = Clock()
     out = make_output(small_bank, "JACK", clock)
@@ -501,7 +501,7 @@ def test_status_line_and_osc_status_say_device_lost_with_the_reason(small_bank, 
     line = status_line(out.engine, out)
     assert line.startswith("device lost: JACK server shut down | ch1 I=0.50 B=+0.70")
     try:
-        from vibsynth.control.osc import OscHandler
+        from vibsynth.control.osc.handler import OscHandler
     except ImportError:
         pytest.skip("OSC adapter not installed")
     ctl = Controller(out.engine)

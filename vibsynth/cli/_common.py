@@ -9,7 +9,7 @@ from typing import Callable
 
 from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
-from vibsynth.io import default_basis, load_basis
+from vibsynth.formats.basis_file import default_basis, load_basis
 
 __all__ = [
     "finite_float",

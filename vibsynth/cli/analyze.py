@@ -9,7 +9,7 @@ from vibsynth.cli._common import add_basis_argument, basis_from_args, sample_rat
 from vibsynth.dsp.analysis import Analysis, analyze
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB
 from vibsynth.errors import InputError, ParameterError
-from vibsynth.io import read_recording
+from vibsynth.formats.recordings import read_recording
 
 ORDER = 10
 

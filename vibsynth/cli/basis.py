@@ -4,12 +4,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
 from vibsynth.cli._common import Progress, add_basis_argument, basis_from_args, sample_rate
 from vibsynth.dsp.basis import Basis
 from vibsynth.errors import InputError
-from vibsynth.fitting import fit_from_psd_table, fit_from_recordings
-from vibsynth.io import save_basis
+from vibsynth.formats.basis_file import save_basis
+from vibsynth.research.basis_fit import fit_from_psd_table, fit_from_recordings
 
 ORDER = 30
 

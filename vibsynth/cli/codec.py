@@ -7,7 +7,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-
 from vibsynth.cli._common import add_basis_argument, basis_from_args, finite_float, integer_in, number_in, sample_rate
 from vibsynth.errors import InputError, ParameterError
 
@@ -106,9 +105,10 @@ def _basis_for(args: argparse.Namespace, basis_id: str) -> Any:
 
 
 def run_encode(args: argparse.Namespace) -> int:
-    from vibsynth import vbt
+    from vibsynth.app import vbt_render
     from vibsynth.dsp.codec import Quantizer, encode_trajectory, quality
-    from vibsynth.io import read_recording
+    from vibsynth.formats import vbt
+    from vibsynth.formats.recordings import read_recording
 
     if args.hop_ms > args.window_ms:
         raise ParameterError(f"--hop-ms ({args.hop_ms:g}) must not exceed --window-ms ({args.window_ms:g})")
@@ -135,7 +135,7 @@ def run_encode(args: argparse.Namespace) -> int:
         **ratios(size, rec.samples.size, rec.fs),
     }
     if not args.no_check:
-        rendered = vbt.render(decoded.trajectory, basis=basis)
+        rendered = vbt_render.render(decoded.trajectory, basis=basis)
         q = quality(rec.samples, rendered.signal, fs=rec.fs, decoded_fs=rendered.fs, basis=basis,
                     offset_db=rendered.offset_db, window_s=traj.window_s, hop_s=traj.hop_s)
         report["quality"] = q.to_dict()
@@ -153,15 +153,16 @@ def run_encode(args: argparse.Namespace) -> int:
 
 
 def run_decode(args: argparse.Namespace) -> int:
-    from vibsynth import vbt
+    from vibsynth.app import vbt_render
     from vibsynth.dsp.codec import quality
-    from vibsynth.io import read_recording, write_wav
+    from vibsynth.formats import vbt
+    from vibsynth.formats.recordings import read_recording, write_wav
 
     started = time.perf_counter()
     decoded = vbt.read_vbt(args.input)
     traj = decoded.trajectory
     basis = _basis_for(args, traj.basis_id)
-    rendered = vbt.render(traj, basis=basis, rate=args.rate, config_path=args.config)
+    rendered = vbt_render.render(traj, basis=basis, rate=args.rate, config_path=args.config)
     signal = rendered.signal * (10.0 ** (rendered.offset_db / 20.0) if args.absolute else 1.0)
     write_wav(args.output, signal, rendered.fs)
     decode_s = time.perf_counter() - started

@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from vibsynth.research import scores_for_files
+    from vibsynth.research.dissim import scores_for_files
 
     if len(args.files) < 2:
         raise ParameterError("compare needs at least two recordings")

@@ -9,13 +9,13 @@ from typing import Any
 
 import yaml
 
-from vibsynth.config import (
+from vibsynth.settings.actuators import resolve_actuator_response
+from vibsynth.settings.config import (
     ENV_VARS,
     SCHEMA,
     add_config_arguments,
     check_config_file,
     config_from_args,
-    resolve_actuator_response,
     user_config_file,
 )
 
@@ -93,4 +93,4 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=cmd_path)
 
 
-_ = SCHEMA  # documented keys live in vibsynth.config.SCHEMA
+_ = SCHEMA  # documented keys live in vibsynth.settings.config.SCHEMA

@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
         print(f" {mark}{d['index']:3d}: {d['name']}  [{api}, {d['max_output_channels']} out, "
               f"{d['default_samplerate']:g} Hz, low latency {1000 * d['default_low_output_latency']:.1f} ms]")
     try:
-        from vibsynth.control.midi import list_inputs
+        from vibsynth.control.midi.adapter import list_inputs
     except ImportError:
         return 0
     try:

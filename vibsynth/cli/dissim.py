@@ -39,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_fit(args: argparse.Namespace) -> int:
-    from vibsynth.research import fit_from_ratings, read_ratings, require_sklearn, scores_for_files
+    from vibsynth.research.dissim import fit_from_ratings, read_ratings, require_sklearn, scores_for_files
 
     require_sklearn("vibsynth dissim fit")
     table = read_ratings(args.ratings)

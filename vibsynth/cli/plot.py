@@ -46,15 +46,15 @@ def _done(path: Path) -> int:
 
 
 def run_basis(args: argparse.Namespace) -> int:
-    from vibsynth.plots import plot_basis
+    from vibsynth.research.plots import plot_basis
 
     return _done(plot_basis(basis_from_args(args), args.output))
 
 
 def run_spectrum(args: argparse.Namespace) -> int:
     from vibsynth.dsp.analysis import analyze
-    from vibsynth.io import read_recording
-    from vibsynth.plots import plot_spectrum
+    from vibsynth.formats.recordings import read_recording
+    from vibsynth.research.plots import plot_spectrum
 
     basis = basis_from_args(args)
     spectra = []
@@ -68,11 +68,11 @@ def run_spectrum(args: argparse.Namespace) -> int:
 
 
 def run_presets(args: argparse.Namespace) -> int:
-    from vibsynth.plots import plot_presets
+    from vibsynth.research.plots import plot_presets
 
     try:
-        from vibsynth.config import load_config
-        from vibsynth.presets import load_library
+        from vibsynth.settings.config import load_config
+        from vibsynth.settings.library import load_library
     except ImportError:
         raise PresetError("presets are not available in this version of vibsynth") from None
     library = load_library(load_config(args.config) if args.config else load_config())
@@ -85,8 +85,8 @@ def run_presets(args: argparse.Namespace) -> int:
 
 def run_mds(args: argparse.Namespace) -> int:
     from vibsynth.dsp.dissimilarity import PAPER_WEIGHTS, check_weights
-    from vibsynth.plots import plot_mds
-    from vibsynth.research import mds_map, read_ratings, scores_for_files
+    from vibsynth.research.dissim import mds_map, read_ratings, scores_for_files
+    from vibsynth.research.plots import plot_mds
 
     basis = basis_from_args(args)
     weights = PAPER_WEIGHTS

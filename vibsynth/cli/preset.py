@@ -11,16 +11,10 @@ from pathlib import Path
 from typing import Any
 
 from vibsynth import __version__
-from vibsynth.config import Config, add_config_arguments, config_from_args
 from vibsynth.errors import PresetError
-from vibsynth.presets import (
-    BALANCE_LIMIT,
-    GLIDE_MAX_MS,
-    Preset,
-    PresetLibrary,
-    load_library,
-    preset_to_yaml,
-)
+from vibsynth.settings.config import Config, add_config_arguments, config_from_args
+from vibsynth.settings.library import PresetLibrary, load_library
+from vibsynth.settings.presets import BALANCE_LIMIT, GLIDE_MAX_MS, Preset, preset_to_yaml
 
 __all__ = ["ORDER", "register"]
 
@@ -72,7 +66,7 @@ def _fmt_table(rows: list[list[str]]) -> str:
 
 def _write_new(library: PresetLibrary, preset: Preset, output: Path | None, force: bool) -> Path:
     if output is not None:
-        from vibsynth.presets import save_preset
+        from vibsynth.settings.presets import save_preset
 
         target = output / f"{preset.name}.yaml" if output.is_dir() else output
         if target.exists() and not force:
@@ -151,7 +145,8 @@ def cmd_new(args: argparse.Namespace) -> int:
 def cmd_from_recording(args: argparse.Namespace) -> int:
     from vibsynth.dsp.analysis import analyze
     from vibsynth.errors import ParameterError
-    from vibsynth.io import default_basis, load_basis, read_recording
+    from vibsynth.formats.basis_file import default_basis, load_basis
+    from vibsynth.formats.recordings import read_recording
 
     config, library = _library(args)
     recording = read_recording(args.file, fs=args.rate, channel=args.channel)
@@ -204,7 +199,7 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
 
 
 def render_preset(config: Config, library: PresetLibrary, name: str, seconds: float) -> tuple[Any, float]:
-    """Render a preset through the engine (``vibsynth.service.build_engine``) for ``seconds``.
+    """Render a preset through the engine (``vibsynth.app.service.build_engine``) for ``seconds``.
 
     Returns
     -------
@@ -216,9 +211,9 @@ def render_preset(config: Config, library: PresetLibrary, name: str, seconds: fl
     from vibsynth.control.controller import Controller, KnobLimits
 
     try:
-        from vibsynth.service import build_engine
+        from vibsynth.app.service import build_engine
     except ImportError as exc:  # pragma: no cover - service.py comes from another issue
-        raise PresetError(f"preset play needs vibsynth.service.build_engine ({exc})") from None
+        raise PresetError(f"preset play needs vibsynth.app.service.build_engine ({exc})") from None
     preset = library.get(name)
     engine = build_engine(config)
     knobs = config.section("knobs")
@@ -245,7 +240,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     library = load_library(config)
     preset = library.get(args.name)
     if args.output is not None:
-        from vibsynth.io import write_wav
+        from vibsynth.formats.recordings import write_wav
 
         samples, fs = render_preset(config, library, preset.name, args.seconds)
         write_wav(args.output, samples, fs, sample_format=args.format)
@@ -257,9 +252,9 @@ def cmd_play(args: argparse.Namespace) -> int:
     from vibsynth.control.controller import Controller, KnobLimits
 
     try:
-        from vibsynth.service import build_engine, open_output
+        from vibsynth.app.service import build_engine, open_output
     except ImportError as exc:  # pragma: no cover
-        raise PresetError(f"preset play needs vibsynth.service ({exc}); use -o FILE.wav meanwhile") from None
+        raise PresetError(f"preset play needs vibsynth.app.service ({exc}); use -o FILE.wav meanwhile") from None
     engine = build_engine(config)
     knobs = config.section("knobs")
     controller = Controller(engine, limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),

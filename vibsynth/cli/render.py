@@ -21,7 +21,7 @@ from vibsynth.dsp.analysis import VARIANTS, variant_spectra
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB, knob_to_level_db
 from vibsynth.dsp.synthesis import SpectralShaper
 from vibsynth.errors import InputError, ParameterError
-from vibsynth.io import write_wav
+from vibsynth.formats.recordings import write_wav
 
 ORDER = 20
 
@@ -64,15 +64,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _render_midi(args: argparse.Namespace) -> tuple[np.ndarray, float]:
     try:
-        from vibsynth.control.midi import render_midi_file
+        from vibsynth.app.midi_render import render_midi_file
     except ImportError as exc:
         raise InputError(f"MIDI rendering is unavailable: {exc}") from None
-    from vibsynth.config import load_config
+    from vibsynth.settings.config import load_config
 
     overrides = {"audio": {"rate": int(args.rate)}} if args.rate else None
     config = load_config(args.config, overrides=overrides)
     try:
-        from vibsynth.presets import load_library
+        from vibsynth.settings.library import load_library
 
         presets = load_library(config)
     except ImportError:

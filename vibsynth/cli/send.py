@@ -10,7 +10,7 @@ import sys
 import time
 from typing import Sequence
 
-from vibsynth.control.osc_codec import (
+from vibsynth.control.osc.codec import (
     IMMEDIATE,
     Bundle,
     MalformedPacket,
@@ -118,7 +118,7 @@ def _defaults(args: argparse.Namespace) -> tuple[str, int]:
     host, port = args.host, args.port
     if host is None or port is None:
         try:
-            from vibsynth.config import load_config
+            from vibsynth.settings.config import load_config
 
             section = load_config().data.get("osc", {})
         except Exception:  # noqa: BLE001 - the client must work even with a broken config

@@ -40,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("serve", help="run the real-time engine (audio output + OSC/MIDI control)",
                               description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     try:
-        from vibsynth.config import add_config_arguments
+        from vibsynth.settings.config import add_config_arguments
     except ImportError:
         p.add_argument("--config", metavar="FILE.yaml", type=Path, help="user config file")
     else:
@@ -67,9 +67,9 @@ def _config(args: argparse.Namespace) -> Any:
     if args.wav and args.output is None:
         extra["audio.backend"] = "wav"
     try:
-        from vibsynth.config import config_from_args
+        from vibsynth.settings.config import config_from_args
     except ImportError:
-        from vibsynth.config import load_config
+        from vibsynth.settings.config import load_config
 
         nested: dict[str, dict[str, Any]] = {}
         for key, value in extra.items():
@@ -81,7 +81,7 @@ def _config(args: argparse.Namespace) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from vibsynth.service import serve
+    from vibsynth.app.service import serve
 
     # The CLI owns the process: SIGTERM/SIGINT exit (code 0) on time even if a device hangs.
     return serve(_config(args), args, owns_process=True)

@@ -55,7 +55,7 @@ class EngineLike(Protocol):
 
 
 class PresetLike(Protocol):
-    """What the controller needs of a preset (see :mod:`vibsynth.presets`)."""
+    """What the controller needs of a preset (see :mod:`vibsynth.settings.presets`)."""
 
     name: str
     intensity: float

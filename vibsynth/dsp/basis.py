@@ -18,7 +18,7 @@ the basis' database, -1 = the 2nd percentile; piecewise linear on each side, so
 values beyond +-1 are legal and simply further out.
 
 No I/O here: :meth:`Basis.to_dict` / :meth:`Basis.from_dict` give plain data that
-:mod:`vibsynth.io` writes and reads as YAML.
+:mod:`vibsynth.formats` writes and reads as YAML.
 """
 from __future__ import annotations
 

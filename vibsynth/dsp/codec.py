@@ -42,7 +42,7 @@ centre; between consecutive centres the knobs glide linearly (the engine's ramps
 linear in intensity knob = linear in dB; linear in balance), so a step lands
 between the two windows that straddle it, spread over one hop.
 
-No I/O here: arrays in, arrays out (the file format is :mod:`vibsynth.vbt`).
+No I/O here: arrays in, arrays out (the file format is :mod:`vibsynth.formats.vbt`).
 """
 from __future__ import annotations
 

@@ -15,7 +15,7 @@ Default weights: the paper's finding (Fig. 6b) that only the first component
 matters, ``w = [1, 0, ..., 0]``, so by default ``D = |t1_x - t1_y|`` in t1 units
 (dB of the level-normalised spectrum projected on the unit vector V1; the default
 basis spans about -40..+40 t1 between its 2nd and 98th percentile). Weights
-fitted to ratings (:func:`vibsynth.research.fit_dissimilarity_weights`) put D on
+fitted to ratings (:func:`vibsynth.research.dissim.fit_dissimilarity_weights`) put D on
 the rating scale instead (plus an intercept, the rating of identical pairs).
 
 Classical (Torgerson) MDS places items in a low-dimensional space whose Euclidean

@@ -257,8 +257,8 @@ def _read_cache(path: Path, key: dict, fs: float) -> NoiseBank:
 
 
 def _write_cache(path: Path, bank: NoiseBank) -> None:
-    """Write the cache file through :func:`vibsynth.io.atomic_write`, streamed (no in-memory copy)."""
-    from vibsynth.io import atomic_write
+    """Write the cache file through :func:`vibsynth.formats.files.atomic_write`, streamed (no in-memory copy)."""
+    from vibsynth.formats.files import atomic_write
 
     def write(handle: BinaryIO) -> None:
         np.savez(handle, signals=bank.signals, balances=bank.balances, peaks=bank.peaks,

@@ -600,7 +600,7 @@ class WavOutput(OutputBackend):
         self._write()
 
     def _write(self) -> None:
-        from vibsynth.io import write_wav
+        from vibsynth.formats.recordings import write_wav
 
         try:
             write_wav(self.path, self._data[: self._done], self.engine.fs)

@@ -1,0 +1,310 @@
+"""OSC 1.0 address patterns: semantics, a fuzz test against a reference matcher, time bounds.
+
+Issue 12, fault 1: a pattern of a few dozen ``*`` (under 100 bytes) made the regular
+expression it was translated to backtrack exponentially and froze the server. The
+matcher is now a dynamic programme (no backtracking); these tests compare it with an
+independent brute-force matcher (recursive, memoised) on random patterns and bound the
+time of every match relative to a plain match measured in the same test.
+"""
+from __future__ import annotations
+
+import functools
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.control.osc.fakes import FakePeer, make_controller
+from vibsynth.control.osc.address import MAX_FANOUT, MAX_PATTERN_LEN, AddressSpace, compile_pattern
+from vibsynth.control.osc.codec import encode_message
+from vibsynth.control.osc.handler import OscHandler
+from vibsynth.errors import ParameterError
+
+ROOT = Path(__file__).resolve().parents[3]
+
+#: A match may cost at most this many times a plain ``/vibsynth/ch/*/intensity`` match, per
+#: pattern length of that plain pattern (the matcher is linear in the pattern length).
+BUDGET_FACTOR = 50.0
+PLAIN = "/vibsynth/ch/*/intensity"
+
+
+# ---------------------------------------------------------------------- reference matcher
+def _reference_valid(pattern: str) -> bool:
+    """OSC 1.0 syntax as the server accepts it: brackets closed within a part, ``[]`` not empty."""
+    if len(pattern) > MAX_PATTERN_LEN:
+        return False
+    i = 0
+    while i < len(pattern):
+        c = pattern[i]
+        if c in "]}":
+            return False
+        if c in "[{":
+            close = "]" if c == "[" else "}"
+            end = pattern.find(close, i + 1)
+            if end < 0 or "/" in pattern[i + 1:end]:
+                return False
+            body = pattern[i + 1:end]
+            if c == "[" and body in ("", "!"):
+                return False
+            i = end
+        i += 1
+    return True
+
+
+def _reference_in_set(body: str, char: str) -> bool:
+    negate = body.startswith("!")
+    if negate:
+        body = body[1:]
+    hit = False
+    j = 0
+    while j < len(body):
+        if j + 2 < len(body) and body[j + 1] == "-":
+            low, high = min(body[j], body[j + 2]), max(body[j], body[j + 2])
+            hit = hit or low <= char <= high
+            j += 3
+        else:
+            hit = hit or char == body[j]
+            j += 1
+    return hit != negate
+
+
+def reference_match(pattern: str, address: str) -> bool:
+    """Brute force over the raw strings: try every way, memoised on (pattern index, address index)."""
+
+    @functools.lru_cache(maxsize=None)
+    def at(p: int, a: int) -> bool:
+        if p == len(pattern):
+            return a == len(address)
+        c = pattern[p]
+        char_ok = a < len(address) and address[a] != "/"
+        if c == "*":
+            return at(p + 1, a) or (char_ok and at(p, a + 1))
+        if c == "?":
+            return char_ok and at(p + 1, a + 1)
+        if c == "[":
+            end = pattern.index("]", p + 1)
+            return char_ok and _reference_in_set(pattern[p + 1:end], address[a]) and at(end + 1, a + 1)
+        if c == "{":
+            end = pattern.index("}", p + 1)
+            return any(address.startswith(w, a) and at(end + 1, a + len(w)) for w in pattern[p + 1:end].split(","))
+        return a < len(address) and address[a] == c and at(p + 1, a + 1)
+
+    return at(0, 0)
+
+
+# ---------------------------------------------------------------------- helpers
+def _best_time(fn, repeats: int = 3) -> float:
+    """Least elapsed time of ``repeats`` calls (the least disturbed by other processes)."""
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def _outcome(space: AddressSpace, pattern: str) -> set[str] | str:
+    try:
+        routes = space.match(pattern)
+    except ParameterError:
+        return "error"
+    return {space.address_of(r.method, r.channel) for r in routes}
+
+
+_WILD = "*?[]{},!-/"
+_ALPHABET = _WILD + "abceghilnstvy0123456789"
+
+
+def _mutate(address: str, rng) -> str:
+    """A pattern derived from a real address (so that many patterns match something)."""
+    out = []
+    i = 0
+    while i < len(address):
+        c = address[i]
+        roll = rng.random() * 2.0  # about one position in eight is changed
+        if roll < 0.08:
+            out.append("*")
+            i += int(rng.integers(0, 4))
+            continue
+        if roll < 0.14 and c != "/":
+            out.append("?")
+        elif roll < 0.18 and c != "/":
+            other = str(rng.choice(list("abin0129")))
+            out.append("[" + ("!" if rng.random() < 0.3 else "") + "".join(sorted({c, other})) + "]")
+        elif roll < 0.21 and c != "/":
+            out.append("[" + other_range(c, rng) + "]")
+        elif roll < 0.25 and c != "/":
+            j = min(len(address), i + int(rng.integers(1, 5)))
+            word = address[i:j].split("/")[0]
+            alts = [word, word[::-1], ""][: int(rng.integers(1, 4))]
+            out.append("{" + ",".join(alts) + "}")
+            i += len(word)
+            continue
+        elif roll < 0.28:
+            out.append(str(rng.choice(list(_ALPHABET))))
+        else:
+            out.append(c)
+        i += 1
+    return "".join(out)
+
+
+def other_range(c: str, rng) -> str:
+    low = chr(ord(c) - int(rng.integers(0, 3)))
+    high = chr(ord(c) + int(rng.integers(-1, 3)))
+    return f"{low}-{high}"
+
+
+def _random_pattern(rng) -> str:
+    n = int(rng.integers(1, 40))
+    return "/" + "".join(str(c) for c in rng.choice(list(_ALPHABET), size=n))
+
+
+# ---------------------------------------------------------------------- semantics
+@pytest.mark.parametrize("pattern, address, expected", [
+    ("/a/?", "/a/b", True),
+    ("/a?b", "/a/b", False),                  # ? never matches /
+    ("/a*", "/a/b", False),                   # * never crosses /
+    ("/*/b", "/a/b", True),
+    ("/a/*", "/a/", True),                    # * matches an empty run
+    ("/x[abc]", "/xb", True),
+    ("/x[!abc]", "/xb", False),
+    ("/x[!abc]", "/xd", True),
+    ("/x[a-c]", "/xb", True),
+    ("/x[c-a]", "/xb", True),                 # a reversed range is read low to high
+    ("/x[-a]", "/x-", True),                  # - first is literal
+    ("/x[a-]", "/x-", True),                  # - last is literal
+    ("/{foo,bar}/z", "/bar/z", True),
+    ("/{foo,bar}/z", "/baz/z", False),
+    ("/a{,b}", "/a", True),                   # an empty alternative
+    ("/x*y*z", "/xaaayaaz", True),
+    ("/x*y*z", "/xaaayaa", False),
+    ("/a,b", "/a,b", True),                   # , outside {} is literal
+])
+def test_pattern_semantics(pattern, address, expected):
+    assert compile_pattern(pattern).matches(address) is expected
+    assert reference_match(pattern, address) is expected
+
+
+@pytest.mark.parametrize("bad, fragment", [
+    ("/vibsynth/ch/[1/x", "unbalanced '['"),
+    ("/vibsynth/{a/b}", "unbalanced '{'"),
+    ("/vibsynth/]", "unbalanced ']'"),
+    ("/vibsynth/x}", "unbalanced '}'"),
+    ("/vibsynth/[]", "empty '[...]'"),
+    ("/vibsynth/[!]", "empty '[...]'"),
+    ("/x/" + "*" * 300, f"longer than {MAX_PATTERN_LEN}"),
+])
+def test_pattern_errors_name_the_problem(bad, fragment):
+    with pytest.raises(ParameterError, match=fragment.replace("[", r"\[").replace("{", r"\{")):
+        compile_pattern(bad)
+
+
+def test_sixty_four_channels_fit_the_fanout_cap():
+    space = AddressSpace("/vibsynth", 64)
+    assert len(space.addresses) == 14 + 8 * 64 <= MAX_FANOUT
+    routes = space.match("/vibsynth/ch/*/intensity")
+    assert [r.channel for r in routes] == list(range(64)) and {r.method for r in routes} == {"intensity"}
+    assert len(space.match("/vibsynth/*/*/*")) == 512
+
+
+def test_fanout_beyond_the_cap_is_an_error_and_nothing_is_done():
+    ctl = make_controller(channels=4)
+    handler = OscHandler(ctl, sync_worker=None)
+    handler.space = AddressSpace("/vibsynth", 4, max_fanout=8)
+    peer = FakePeer()
+    handler.handle_packet(encode_message("/vibsynth/ch/*/intensity", (0.5,)), peer)   # 4 routes: fine
+    assert [c.value for c in ctl.engine.commands] == [0.5]
+    handler.handle_packet(encode_message("/vibsynth/ch/*/*", (0.25,)), peer)          # 32 routes
+    address, message = peer.errors()[-1]
+    assert address == "/vibsynth/ch/*/*"
+    assert "matches 32 addresses, more than the limit of 8" in message
+    assert [c.value for c in ctl.engine.commands] == [0.5]
+    assert ctl.error_counts["osc.bad_pattern"] == 1
+
+
+def test_pattern_cache_is_bounded_and_remembers_errors():
+    space = AddressSpace("/vibsynth", 4, cache_size=4)
+    for k in range(10):
+        space.match(f"/vibsynth/ch/{k}*/intensity")
+    assert len(space._cache) == 4
+    for _ in range(2):
+        with pytest.raises(ParameterError, match="unbalanced"):
+            space.match("/vibsynth/[x")
+    assert space._cache["/vibsynth/[x"] == "unbalanced '[' in address pattern"
+
+
+# ---------------------------------------------------------------------- fuzz + time budget
+def test_fuzz_against_reference_within_time_budget(rng):
+    """4000 random patterns against a 12-channel table (182 addresses): the same matches and the
+    same errors as the brute-force reference, each match within 50x a plain match (per length)."""
+    space = AddressSpace("/vibsynth", 12, cache_size=0)
+    addresses = space.addresses
+    baseline = min(_best_time(lambda: space.match(PLAIN), repeats=30), 1e9)
+    worst_ratio, worst_pattern, compared, matched = 0.0, "", 0, 0
+    for k in range(4000):
+        pattern = _mutate(str(rng.choice(addresses)), rng) if k % 4 else _random_pattern(rng)
+        got = _outcome(space, pattern)
+        if _reference_valid(pattern):
+            want: set[str] | str = {a for a in addresses if reference_match(pattern, a)}
+        else:
+            want = "error"
+        assert got == want, pattern
+        compared += 1
+        matched += bool(want) and want != "error"
+        if not any(c in "*?[]{}" for c in pattern):
+            continue
+        elapsed = _best_time(lambda: _outcome(space, pattern))
+        ratio = elapsed / (baseline * max(1.0, len(pattern) / len(PLAIN)))
+        if ratio > worst_ratio:
+            worst_ratio, worst_pattern = ratio, pattern
+    print(f"\nfuzz: {compared} patterns, {matched} matching something; plain match {1e6 * baseline:.0f} us; "
+          f"worst time / (plain x length ratio) = {worst_ratio:.1f} for {worst_pattern!r}")
+    assert matched > 1000
+    assert worst_ratio < BUDGET_FACTOR, worst_pattern
+
+
+_PATHOLOGICAL_CHILD = r"""
+import json, sys, time
+from vibsynth.control.osc.address import AddressSpace
+space = AddressSpace("/vibsynth", 64, cache_size=0)
+def best(p, repeats=3):
+    t = float("inf")
+    for _ in range(repeats):
+        s = time.perf_counter(); space.match(p); t = min(t, time.perf_counter() - s)
+    return t
+out = {"baseline": best("/vibsynth/ch/*/intensity", 30)}
+for p in json.loads(sys.argv[1]):
+    out[p] = [best(p), len(space.match(p))]
+print(json.dumps(out))
+"""
+
+
+def test_pathological_patterns_match_in_linear_time():
+    """Patterns that froze the regex matcher. Run in a child process with a timeout, so that a
+    regression fails this test (after 60 s) instead of hanging the suite."""
+    patterns = {
+        "/vibsynth/" + "*a" * 40 + "x": 0,
+        "/vibsynth/" + "*" * 28 + "x": 0,           # the regex took ~5 s on this one
+        "/vibsynth/" + "*" * 200: 14,
+        "/vibsynth/" + "*" * 245 + "x": 0,
+        "/vibsynth/ch/" + "*?" * 118 + "/*": 0,
+        "/vibsynth/ch/*/" + "{a,b,i,n,t,e,s,y,}*" * 12: 512,
+    }
+    assert all(len(p) <= MAX_PATTERN_LEN for p in patterns)
+    try:
+        proc = subprocess.run([sys.executable, "-c", _PATHOLOGICAL_CHILD, json.dumps(list(patterns))],
+                              cwd=ROOT, capture_output=True, text=True, timeout=60, check=True)
+    except subprocess.TimeoutExpired:
+        pytest.fail("a pathological address pattern took more than 60 s (exponential backtracking?)")
+    result = json.loads(proc.stdout)
+    baseline = result.pop("baseline")
+    lines = []
+    for pattern, (elapsed, count) in result.items():
+        assert count == patterns[pattern], pattern
+        budget = BUDGET_FACTOR * baseline * max(1.0, len(pattern) / len(PLAIN))
+        lines.append(f"{len(pattern):4d} chars: {1e3 * elapsed:7.3f} ms (budget {1e3 * budget:.1f} ms)")
+        assert elapsed < min(budget, 1.0), pattern
+    print("\nplain match %.3f ms (64 channels); pathological patterns:\n  " % (1e3 * baseline) + "\n  ".join(lines))

@@ -1,0 +1,336 @@
+"""Wiring for ``vibsynth serve``: config -> basis -> bank -> engine -> output, presets, control adapters.
+
+Flow (one direction, each layer knows only the one below)::
+
+    OSC / MIDI adapters, preset watcher  ->  Controller  ->  Engine.submit
+    output backend (audio thread)        ->  Engine.render_into
+
+:func:`build_engine` and :func:`open_output` are usable on their own (tests,
+benchmarks); :func:`serve` runs until Ctrl-C/SIGTERM or ``--seconds``.
+
+A lost audio device does not stop the service: the output's supervisor retries it
+with back-off while OSC/MIDI keep working, and ``/status``, the console status line
+and the log say ``device lost`` with the reason. SIGTERM/SIGINT exit with code 0
+within :data:`EXIT_DEADLINE_S` in every state (see :class:`~vibsynth.engine.supervisor.ExitGuard`).
+"""
+from __future__ import annotations
+
+import logging
+import signal
+import sys
+import threading
+import time
+from typing import Any, Callable
+
+from vibsynth.control import adapter_modules
+from vibsynth.control.controller import Controller, KnobLimits
+from vibsynth.dsp.basis import Basis
+from vibsynth.engine.actuator import ActuatorResponse
+from vibsynth.engine.bank import BankSpec, load_or_build
+from vibsynth.engine.commands import SetMute
+from vibsynth.engine.engine import DEFAULT_SCHEDULE_CAPACITY, Engine
+from vibsynth.engine.outputs import NullOutput, OutputBackend, SoundDeviceOutput, WavOutput
+from vibsynth.engine.supervisor import STREAMING, ExitGuard, hard_exit
+from vibsynth.errors import ConfigError, DeviceError, ParameterError, VibsynthError
+
+__all__ = ["build_engine", "open_output", "serve", "actuator_from_config", "status_line"]
+
+log = logging.getLogger(__name__)
+
+#: After SIGTERM/SIGINT, a process run by the CLI exits (code 0) after at most this long,
+#: even if closing a device hangs.
+EXIT_DEADLINE_S = 1.5
+
+
+def _get(config: Any, section: str, key: str, default: Any = None) -> Any:
+    return config.data.get(section, {}).get(key, default)
+
+
+def actuator_from_config(config: Any) -> ActuatorResponse:
+    """The actuator response to equalise for (explicit points, else the profile, else flat)."""
+    points: Any = None
+    try:
+        from vibsynth.settings.actuators import resolve_actuator_response  # the full config module
+    except ImportError:
+        points = _get(config, "actuator", "response")
+    else:
+        points = resolve_actuator_response(config)
+    return ActuatorResponse.from_points(points, max_boost_db=_get(config, "actuator", "max_boost_db", 12.0))
+
+
+def build_engine(
+    config: Any, basis: Basis | None = None, *, progress: Callable[[float, str], None] | None = None
+) -> Engine:
+    """Build (or load from the cache) the bank and an engine from the effective config.
+
+    Parameters
+    ----------
+    config : Config
+    basis : Basis, optional
+        Default: the shipped basis.
+    progress : callable, optional
+        ``progress(fraction, message)`` while the bank is built.
+
+    Raises
+    ------
+    ConfigError
+        An invalid bank/knob/audio setting (names the key).
+    """
+    if basis is None:
+        from vibsynth.formats.basis_file import default_basis
+
+        basis = default_basis()
+    audio, bank_cfg, knobs = config.data["audio"], config.data["bank"], config.data["knobs"]
+    try:
+        spec = BankSpec(
+            fs=float(audio["rate"]), loop_seconds=float(bank_cfg["loop_seconds"]),
+            balance_min=float(bank_cfg["balance_min"]), balance_max=float(bank_cfg["balance_max"]),
+            levels=int(bank_cfg["levels"]), seed=int(bank_cfg["seed"]), actuator=actuator_from_config(config),
+        )
+    except (ParameterError, TypeError, ValueError) as exc:
+        raise ConfigError(f"bank/audio settings: {exc}") from None
+    cache_dir = bank_cfg.get("cache_dir")
+    started = time.perf_counter()
+    bank, origin = load_or_build(basis, spec, cache_dir=cache_dir, progress=progress)
+    log.info("noise bank %s in %.2f s (%d levels x %.1f s at %g Hz)", origin, time.perf_counter() - started,
+             bank.levels, bank.n_samples / bank.fs, bank.fs)
+    block = int(audio.get("block_size") or 0)
+    try:
+        return Engine(
+            bank, channels=int(audio["channels"]), ceiling_db=float(knobs["ceiling_db"]),
+            range_db=float(knobs["range_db"]), glide_s=float(knobs["glide_ms"]) / 1000.0,
+            mute_fade_s=float(knobs["mute_fade_ms"]) / 1000.0, limiter_ceiling=float(knobs["limiter_ceiling"]),
+            initial_intensity=float(knobs.get("initial_intensity", 0.0)),
+            initial_balance=float(knobs.get("initial_balance", 0.0)),
+            schedule_capacity=int(knobs.get("schedule_capacity", DEFAULT_SCHEDULE_CAPACITY)),
+            max_block=block if 0 < block < bank.n_samples else 1024,
+        )
+    except ParameterError as exc:
+        raise ConfigError(f"engine settings: {exc}") from None
+
+
+def _latency(value: Any) -> str | float:
+    if isinstance(value, str) and value in ("low", "high"):
+        return value
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"audio.latency must be low, high or seconds, got {value!r}") from None
+
+
+def open_output(
+    config: Any,
+    engine: Engine,
+    explicit_device: bool,
+    *,
+    wav_path: str | None = None,
+    seconds: float | None = None,
+) -> OutputBackend:
+    """Create (and for sounddevice, open) the configured output.
+
+    ``audio.backend = auto`` tries PortAudio and falls back to :class:`NullOutput`
+    with a one-line warning when PortAudio is missing or no device can be opened,
+    unless ``explicit_device`` (the user named a device or the sounddevice
+    backend): then the :class:`DeviceError` propagates.
+    """
+    audio = config.data["audio"]
+    backend = audio.get("backend") or "auto"
+    block = int(audio.get("block_size") or 0)
+    if backend == "null":
+        return NullOutput(engine, block_size=block or 128)
+    if backend == "wav":
+        if not wav_path:
+            raise ParameterError("the wav output needs a file: -o FILE.wav")
+        if seconds is None:
+            raise ParameterError("the wav output needs a duration: --seconds N")
+        return WavOutput(engine, wav_path, seconds=seconds, block_size=block or 1024)
+    if backend not in ("auto", "sounddevice"):
+        raise ConfigError(f"audio.backend must be auto, sounddevice, null or wav, got {backend!r}")
+    output = SoundDeviceOutput(
+        engine, device=audio.get("device"), host_api=audio.get("host_api"), block_size=block,
+        latency=_latency(audio.get("latency", "low")), channel_map=audio.get("channel_map"),
+    )
+    try:
+        output.open()
+    except DeviceError as exc:
+        if explicit_device or backend == "sounddevice":
+            raise
+        log.warning("%s; falling back to the null output (no vibration will be produced)", exc)
+        return NullOutput(engine, block_size=block or 128)
+    return output
+
+
+def output_state(output: OutputBackend) -> str:
+    """``device lost: JACK server shut down`` (state and reason), or just the state."""
+    state, reason = getattr(output, "state", STREAMING), getattr(output, "state_reason", "")
+    return f"{state}: {reason}" if reason else str(state)
+
+
+def status_line(engine: Engine, output: OutputBackend) -> str:
+    """One line: output state when not streaming, knobs per channel, underflows, render load."""
+    state = output_state(output)
+    chans = [] if state == STREAMING else [state]
+    for c, (k, b, muted) in enumerate(engine.knob_values()):
+        chans.append(f"ch{c + 1} I={k:.2f} B={b:+.2f}{' (muted)' if muted else ''}")
+    peak = engine.stats.take_peak()
+    return (f"{' | '.join(chans)} | underflows {output.stats.underflows} | "
+            f"load {100 * engine.stats.load_avg:.1f}% (peak {100 * peak:.0f}%)")
+
+
+def _load_presets(config: Any) -> tuple[Any, Any]:
+    """(library, PresetWatcher class) or (None, None) when presets are unavailable."""
+    try:
+        from vibsynth.settings.library import load_library
+        from vibsynth.settings.reload import PresetWatcher
+    except ImportError as exc:
+        log.warning("presets are not available (%s); serving without them", exc)
+        return None, None
+    try:
+        return load_library(config), PresetWatcher
+    except VibsynthError as exc:
+        log.warning("presets could not be loaded (%s); serving without them", exc)
+        return None, None
+
+
+def serve(config: Any, args: Any, *, owns_process: bool = False) -> int:
+    """Run the service until Ctrl-C/SIGTERM (or ``args.seconds``). Returns the exit code.
+
+    ``args`` attributes used: ``preset``, ``balance``, ``intensity``, ``device``,
+    ``output``, ``seconds``, ``wav`` (plus the adapters' own flags).
+
+    Parameters
+    ----------
+    owns_process : bool
+        True when the service is the process (the CLI): a signal then arms an
+        :class:`ExitGuard` (``os._exit(0)`` after :data:`EXIT_DEADLINE_S` if clean-up
+        hangs) and PortAudio is shut down at the end without risking a hang in
+        sounddevice's exit hook. Library callers and tests leave it False.
+    """
+    stop = threading.Event()
+    guard = ExitGuard(EXIT_DEADLINE_S) if owns_process else None
+    previous: dict[int, Any] = {}
+
+    def on_signal(signum: int, frame: Any) -> None:  # no logging or locks here
+        stop.set()
+        if guard is not None:
+            guard.arm()
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            previous[sig] = signal.signal(sig, on_signal)
+    try:
+        return _serve(config, args, stop, owns_process)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) -> int:
+    err = sys.stderr
+    knobs = config.data["knobs"]
+    limits = KnobLimits(balance_min=float(knobs["balance_min"]), balance_max=float(knobs["balance_max"]))
+    intensity, balance = getattr(args, "intensity", None), getattr(args, "balance", None)
+    # Validate the command line before the (possibly slow) bank build.
+    from vibsynth.control.controller import check_range
+
+    if intensity is not None:
+        check_range("--intensity", intensity, 0.0, 1.0)
+    if balance is not None:
+        check_range("--balance", balance, limits.balance_min, limits.balance_max)
+
+    def progress(fraction: float, message: str) -> None:
+        if err.isatty():
+            print(f"\rvibsynth: building noise bank: {100 * fraction:3.0f}% {message}\x1b[K", end="", file=err, flush=True)
+
+    started = time.perf_counter()
+    engine = build_engine(config, progress=progress)
+    if err.isatty():
+        print("\r\x1b[K", end="", file=err)
+    log.info("engine ready in %.2f s", time.perf_counter() - started)
+    if stop.is_set():
+        return 0
+
+    library, watcher_cls = _load_presets(config)
+    controller = Controller(
+        engine, limits=limits, preset_resolver=library.get if library is not None else None,
+        initial_glide_s=float(knobs["glide_ms"]) / 1000.0,
+    )
+    for name, value in (("balance", knobs.get("initial_balance", 0.0)), ("intensity", knobs.get("initial_intensity", 0.0))):
+        if value:
+            controller.set_knob(name, float(value), glide_s=0.0, source="config")
+    if getattr(args, "preset", None):
+        controller.load_preset(args.preset, source="command line")
+    if balance is not None:
+        controller.set_knob("balance", balance, glide_s=0.0, source="command line")
+    if intensity is not None:
+        controller.set_knob("intensity", intensity, glide_s=0.0, source="command line")
+
+    explicit = bool(getattr(args, "device", None) is not None or getattr(args, "output", None) == "sounddevice"
+                    or config.data["audio"].get("device") is not None)
+    output = open_output(config, engine, explicit, wav_path=getattr(args, "wav", None),
+                         seconds=getattr(args, "seconds", None))
+    # The control adapters' /status reads output.state / output.state_reason through this.
+    controller.output = output  # type: ignore[attr-defined]
+
+    servers: list[Any] = []
+    watcher = None
+    portaudio_clean = True
+    try:
+        for module in adapter_modules():
+            server = module.create(config, args, controller, library)
+            if server is not None:
+                server.start()
+                servers.append(server)
+        if library is not None and watcher_cls is not None and config.data.get("presets", {}).get("watch", True):
+            watcher = watcher_cls(library, on_change=lambda name: controller.reapply_preset(name), interval_s=0.5)
+            watcher.start()
+        if not stop.is_set():
+            output.start()
+
+        out = sys.stdout
+        print(f"vibsynth: serving {engine.channels} channel(s) on {output.describe()}", file=out)
+        for server in servers:
+            print(f"vibsynth: {server.describe()}", file=out)
+        prefix = str(config.data.get("osc", {}).get("prefix", "/vibsynth")).rstrip("/")
+        silent = all(k == 0 for k, _, _ in engine.knob_values()) and not intensity
+        hint = "silent until a control arrives; " if silent else ""
+        print(f"vibsynth: {hint}make it vibrate with: vibsynth send {prefix}/intensity 0.5"
+              f"  (Ctrl-C to stop)", file=out, flush=True)
+
+        deadline = None if getattr(args, "seconds", None) is None else time.monotonic() + float(args.seconds)
+        tty = out.isatty()
+        next_status = time.monotonic() + 1.0
+        while not stop.is_set():
+            now = time.monotonic()
+            if deadline is not None and now >= deadline:
+                break
+            if isinstance(output, WavOutput) and not output.is_running():
+                break
+            if tty and now >= next_status:
+                print(f"\r{status_line(engine, output)}\x1b[K", end="", file=out, flush=True)
+                next_status += 1.0
+            stop.wait(0.05 if deadline is None else max(0.0, min(0.05, deadline - now)))
+        if tty:
+            print(file=out)
+    finally:
+        for server in servers:
+            try:
+                server.stop()
+            except Exception as exc:  # keep shutting down
+                log.warning("stopping %s: %s", getattr(server, "name", server), exc)
+        if watcher is not None:
+            watcher.stop()
+        if output.is_running() and not isinstance(output, WavOutput):
+            # Fade out before closing the device: no click at the end.
+            engine.submit(SetMute(True))
+            time.sleep(engine.mute_fade_s + 4 * 1024 / engine.fs)
+        output.stop()
+        if owns_process and isinstance(output, SoundDeviceOutput):
+            portaudio_clean = output.shutdown_portaudio()
+    log.info("stopped; %d underflow(s)", output.stats.underflows)
+    if not portaudio_clean:
+        # After a device loss PortAudio/libjack cannot be shut down (their exit-time
+        # clean-up would hang or crash): end the process here, code 0.
+        log.info("exiting without PortAudio's exit hooks (a device was lost during the run)")
+        hard_exit(0)
+    return 0

@@ -1,0 +1,121 @@
+"""The MIDI adapter for ``vibsynth serve`` (contract of :mod:`vibsynth.control`): flags, ports, learn.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+from typing import Any
+
+import mido
+
+from vibsynth.control.midi.bindings import KNOBS, MidiSettings, check_learn_knob
+from vibsynth.control.midi.learn_store import user_config_path
+from vibsynth.control.midi.mapper import MidiMapper
+from vibsynth.control.midi.server import VIRTUAL_PORT_NAME, MidiServer, _one_line, resolve_port_name, running_servers
+from vibsynth.errors import DeviceError
+
+log = logging.getLogger(__name__)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the MIDI flags of ``vibsynth serve``."""
+    group = parser.add_argument_group("MIDI")
+    group.add_argument("--midi", metavar="NAME|INDEX", default=None,
+                       help="open this MIDI input (name substring or index from `vibsynth devices`)")
+    group.add_argument("--midi-virtual", action="store_true",
+                       help=f"create a virtual MIDI input named {VIRTUAL_PORT_NAME!r} (ALSA, CoreMIDI, JACK)")
+    group.add_argument("--no-midi", action="store_true", help="do not open any MIDI input")
+    group.add_argument("--learn", metavar="KNOB", choices=KNOBS, default=None,
+                       help="bind the next moved MIDI controller to KNOB (intensity|balance) "
+                            "and save it to the user config file")
+
+
+def list_inputs() -> list[str]:
+    """Names of the MIDI inputs of mido's backend; empty when no backend is usable."""
+    try:
+        return list(mido.get_input_names())
+    except Exception as exc:  # backend missing or its server not running: nothing to list
+        log.debug("no MIDI inputs: %s", exc)
+        return []
+
+
+def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any) -> "MidiServer | None":
+    """Build (not start) the MIDI server from config and flags, or None (after one log line).
+
+    Parameters
+    ----------
+    config : vibsynth.settings.config.Config
+    args : argparse.Namespace
+        ``midi``, ``midi_virtual``, ``no_midi``, ``learn`` (absent = defaults); ``config`` (user file).
+    controller : Controller
+    presets : preset library or None
+
+    Returns
+    -------
+    server : MidiServer or None
+
+    Raises
+    ------
+    ConfigError
+        The ``midi:`` section is invalid.
+    """
+    data = config.data
+    section = data.get("midi") or {}
+    if getattr(args, "no_midi", False) or not section.get("enabled", True):
+        log.info("running without MIDI: disabled (%s)", "--no-midi" if getattr(args, "no_midi", False)
+                 else "midi.enabled is false")
+        return None
+    port = getattr(args, "midi", None)
+    port = section.get("port") if port is None else port
+    virtual = bool(getattr(args, "midi_virtual", False) or (port is None and section.get("virtual", False)))
+    if port is None and not virtual:
+        log.warning("running without MIDI: no input chosen (use --midi NAME|INDEX or --midi-virtual)")
+        return None
+    settings = MidiSettings.from_config(data, controller.channels)
+    try:
+        names = mido.get_input_names()
+    except Exception as exc:
+        log.warning("running without MIDI: the MIDI backend is not usable (%s)", _one_line(exc))
+        return None
+    if not virtual:
+        try:
+            resolve_port_name(port, names)
+        except DeviceError as exc:
+            log.warning("running without MIDI: %s", exc)
+            return None
+    mapper = MidiMapper(controller, settings, presets=presets)
+    server = MidiServer(
+        mapper,
+        port=port,
+        virtual=virtual,
+        config_path=user_config_path(getattr(args, "config", None)),
+        reconnect_interval_s=float(section.get("reconnect_interval_s", 1.0) or 1.0),
+    )
+    if getattr(args, "learn", None):
+        server.learn(args.learn)
+    return server
+
+
+def learn(knob: str) -> bool:
+    """Arm MIDI learn for ``knob`` on every running MIDI server (hook for OSC ``/vibsynth/learn s``).
+
+    Returns
+    -------
+    armed : bool
+        False when no MIDI server is running.
+
+    Raises
+    ------
+    ParameterError
+        Unknown knob.
+    """
+    check_learn_knob(knob)
+    servers = active_servers()
+    for server in servers:
+        server.learn(knob)
+    return bool(servers)
+
+
+def active_servers() -> list["MidiServer"]:
+    """The MIDI servers started and not yet stopped in this process."""
+    return running_servers()

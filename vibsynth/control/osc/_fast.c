@@ -1,0 +1,548 @@
+/*
+ * OSC UDP fast path: the receive loop of the OSC server, in C.
+ *
+ * A VR app or a controller sends the same few messages hundreds of times a second:
+ * `/vibsynth/intensity f`, `/vibsynth/balance f`, `/vibsynth/texture ff` and their
+ * `/vibsynth/ch/N/...` forms. This loop receives datagrams with the GIL released, checks
+ * the sender against the allow list, and decodes those shapes against a precomputed table
+ * of exact addresses (no pattern matching); a valid in-range value goes straight into the
+ * engine's command ring through the core's C API. Anything else (patterns, bundles, other
+ * methods, out-of-range or non-finite values, malformed packets) is handed, in arrival
+ * order, to the Python handler, which validates, answers and counts it.
+ *
+ * Order: once a datagram of a receive batch goes to Python, every later datagram of that
+ * batch does too, and before Python sees a batch the knob values set by the fast path are
+ * recorded in the controller (on_state). So a `get` after a fast `intensity` answers the
+ * new value, and the engine receives every command in arrival order.
+ *
+ * Without an engine core (core=None) there is no fast path: this is then just the receive
+ * loop (allow list, batching) in front of the Python handler.
+ *
+ * The controller (queries, notify subscribers) learns of fast-path moves through
+ * on_state(updates, last_seq) with the last value per (knob, channel): before each Python
+ * batch and at most every STATE_PERIOD_S otherwise.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "../../engine/_core_api.h"
+
+#ifdef _WIN32
+#include <winsock2.h>
+#include <ws2tcpip.h>
+typedef SOCKET sock_t;
+#define poll WSAPoll
+typedef int socklen_t;
+#else
+#include <arpa/inet.h>
+#include <errno.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <time.h>
+typedef int sock_t;
+#endif
+
+#define MAX_DATAGRAM 65536
+#define MAX_BATCH 256
+#define SLOW_ARENA (1 << 20)
+#define TABLE_SIZE 4096 /* open addressing; > 4 x the largest table (14 + 8 x 64 addresses) */
+#define MAX_ADDR 128
+#define MAX_NETS 64
+#define MAXCH 64
+#define STATE_PERIOD_S 0.02
+#define POLL_MS 100
+
+enum { M_INTENSITY = 1, M_BALANCE = 2, M_TEXTURE = 3 };
+
+typedef struct {
+    char address[MAX_ADDR];
+    int len;      /* 0 = empty slot */
+    int method;
+    int channel;  /* -1 = every channel */
+} entry_t;
+
+typedef struct {
+    int family;   /* 4 or 6 */
+    uint8_t net[16];
+    int prefix;
+} net_t;
+
+typedef struct {
+    PyObject_HEAD
+    sock_t fd;
+    PyObject *core;         /* the engine's _core.Core (kept alive) */
+    struct vs_core *core_ptr;
+    const vs_core_api_t *api;
+    int channels;
+    double bal_min, bal_max;
+    PyObject *on_slow;      /* on_slow([(bytes, (host, port)), ...]) */
+    PyObject *on_state;     /* on_state([(knob, channel, value), ...], last_seq) */
+    entry_t table[TABLE_SIZE];
+    net_t nets[MAX_NETS];
+    int n_nets;             /* -1 = allow everyone */
+    volatile int stop;
+    int running;
+    /* fast-path state not yet recorded in the controller */
+    double last_value[2][MAXCH];
+    uint8_t dirty[2][MAXCH];
+    int any_dirty;
+    int64_t last_seq;
+    double last_flush;
+    /* counters */
+    long long packets, bytes, fast, slow, denied, ring_full, handler_errors;
+    /* buffers */
+    uint8_t *scratch;
+    uint8_t *arena;
+    size_t arena_used;
+    int n_slow;
+    size_t slow_off[MAX_BATCH], slow_len[MAX_BATCH];
+    struct sockaddr_storage slow_addr[MAX_BATCH];
+} Receiver;
+
+static double now_s(void) {
+#ifdef _WIN32
+    return (double)GetTickCount64() / 1000.0;
+#else
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+}
+
+static uint32_t hash_bytes(const char *s, int n) {
+    uint32_t h = 2166136261u;
+    for (int i = 0; i < n; i++) h = (h ^ (uint8_t)s[i]) * 16777619u;
+    return h;
+}
+
+static const entry_t *lookup(const Receiver *r, const char *s, int n) {
+    if (n >= MAX_ADDR) return NULL;
+    uint32_t i = hash_bytes(s, n) & (TABLE_SIZE - 1);
+    for (int probes = 0; probes < TABLE_SIZE; probes++, i = (i + 1) & (TABLE_SIZE - 1)) {
+        const entry_t *e = &r->table[i];
+        if (!e->len) return NULL;
+        if (e->len == n && memcmp(e->address, s, (size_t)n) == 0) return e;
+    }
+    return NULL;
+}
+
+static int allowed(const Receiver *r, const struct sockaddr_storage *addr) {
+    if (r->n_nets < 0) return 1;
+    const uint8_t *bytes;
+    int family;
+    uint8_t mapped[4];
+    if (addr->ss_family == AF_INET) {
+        bytes = (const uint8_t *)&((const struct sockaddr_in *)addr)->sin_addr;
+        family = 4;
+    } else if (addr->ss_family == AF_INET6) {
+        bytes = (const uint8_t *)&((const struct sockaddr_in6 *)addr)->sin6_addr;
+        family = 6;
+        static const uint8_t v4prefix[12] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0xff, 0xff};
+        if (memcmp(bytes, v4prefix, 12) == 0) { /* IPv4-mapped: compare as IPv4 */
+            memcpy(mapped, bytes + 12, 4);
+            bytes = mapped;
+            family = 4;
+        }
+    } else {
+        return 0;
+    }
+    for (int k = 0; k < r->n_nets; k++) {
+        const net_t *net = &r->nets[k];
+        if (net->family != family) continue;
+        int bits = net->prefix, i = 0;
+        for (; bits >= 8; bits -= 8, i++)
+            if (bytes[i] != net->net[i]) goto next;
+        if (bits && ((bytes[i] ^ net->net[i]) & (uint8_t)(0xff << (8 - bits)))) goto next;
+        return 1;
+    next:;
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------------ decoding */
+static int padded(int n) { return (n + 4) & ~3; } /* string of n chars + NUL, to a multiple of 4 */
+
+static int read_number(const uint8_t *p, char tag, double *out, int *size) {
+    if (tag == 'f') {
+        uint32_t u = (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
+        float f;
+        memcpy(&f, &u, 4);
+        *out = f;
+        *size = 4;
+    } else if (tag == 'i') {
+        uint32_t u = (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
+        *out = (double)(int32_t)u;
+        *size = 4;
+    } else if (tag == 'd') {
+        uint64_t u = 0;
+        for (int i = 0; i < 8; i++) u = u << 8 | p[i];
+        memcpy(out, &u, 8);
+        *size = 8;
+    } else {
+        return 0;
+    }
+    return isfinite(*out);
+}
+
+static void mark(Receiver *r, int knob, int channel, double value) {
+    if (channel < 0) {
+        for (int c = 0; c < r->channels; c++) {
+            r->last_value[knob][c] = value;
+            r->dirty[knob][c] = 1;
+        }
+    } else {
+        r->last_value[knob][channel] = value;
+        r->dirty[knob][channel] = 1;
+    }
+    r->any_dirty = 1;
+}
+
+static int push_knob(Receiver *r, int knob, int channel, double value) {
+    vs_cmd_t cmd = {CMD_KNOB, knob, value, NAN, channel < 0 ? ~(uint64_t)0 : (uint64_t)1 << channel, -1, 0};
+    int64_t seq = 0;
+    if (r->api->push(r->core_ptr, &cmd, &seq) != PUSH_OK) {
+        r->ring_full++;
+        return 0;
+    }
+    r->last_seq = seq;
+    mark(r, knob, channel, value);
+    return 1;
+}
+
+/* 1 = handled here; 0 = for Python (which validates and answers). */
+static int fast_handle(Receiver *r, const uint8_t *d, int n) {
+    if (!r->api || n < 8 || (n & 3) || d[0] != '/') return 0;
+    const uint8_t *nul = memchr(d, 0, (size_t)n);
+    if (!nul) return 0;
+    int alen = (int)(nul - d);
+    int off = padded(alen);
+    if (off >= n || d[off] != ',') return 0;
+    const entry_t *e = lookup(r, (const char *)d, alen);
+    if (!e) return 0;
+    const uint8_t *tnul = memchr(d + off, 0, (size_t)(n - off));
+    if (!tnul) return 0;
+    int tlen = (int)(tnul - (d + off));
+    const char *types = (const char *)d + off + 1;
+    int nargs = tlen - 1;
+    int want = e->method == M_TEXTURE ? 2 : 1;
+    if (nargs != want) return 0;
+    int p = off + padded(tlen);
+    double v[2];
+    for (int k = 0; k < nargs; k++) {
+        int size;
+        if (p + 4 > n || (types[k] == 'd' && p + 8 > n)) return 0;
+        if (!read_number(d + p, types[k], &v[k], &size)) return 0;
+        p += size;
+    }
+    if (p != n) return 0;
+    switch (e->method) {
+    case M_INTENSITY:
+        if (!(v[0] >= 0.0 && v[0] <= 1.0)) return 0;
+        return push_knob(r, 0, e->channel, v[0]);
+    case M_BALANCE:
+        if (!(v[0] >= r->bal_min && v[0] <= r->bal_max)) return 0;
+        return push_knob(r, 1, e->channel, v[0]);
+    case M_TEXTURE:
+        if (!(v[0] >= 0.0 && v[0] <= 1.0) || !(v[1] >= r->bal_min && v[1] <= r->bal_max)) return 0;
+        /* as Controller.set_texture: balance first, then intensity */
+        if (!push_knob(r, 1, e->channel, v[1])) return 0;
+        push_knob(r, 0, e->channel, v[0]);
+        return 1;
+    default:
+        return 0;
+    }
+}
+
+/* ------------------------------------------------------------------ calls into Python (GIL held) */
+static void flush_state(Receiver *r) {
+    if (!r->any_dirty) return;
+    PyObject *list = PyList_New(0);
+    if (!list) goto fail;
+    for (int knob = 0; knob < 2; knob++) {
+        for (int c = 0; c < r->channels; c++) {
+            if (!r->dirty[knob][c]) continue;
+            r->dirty[knob][c] = 0;
+            PyObject *t = Py_BuildValue("(sid)", knob ? "balance" : "intensity", c, r->last_value[knob][c]);
+            if (!t || PyList_Append(list, t) < 0) {
+                Py_XDECREF(t);
+                goto fail;
+            }
+            Py_DECREF(t);
+        }
+    }
+    r->any_dirty = 0;
+    PyObject *res = PyObject_CallFunction(r->on_state, "OL", list, (long long)r->last_seq);
+    Py_DECREF(list);
+    if (!res) goto fail_noclean;
+    Py_DECREF(res);
+    r->last_flush = now_s();
+    return;
+fail:
+    Py_XDECREF(list);
+fail_noclean:
+    r->handler_errors++;
+    PyErr_WriteUnraisable(r->on_state);
+}
+
+static PyObject *peer_tuple(const struct sockaddr_storage *addr) {
+    char host[INET6_ADDRSTRLEN];
+    int port;
+    if (addr->ss_family == AF_INET6) {
+        const struct sockaddr_in6 *a = (const struct sockaddr_in6 *)addr;
+        inet_ntop(AF_INET6, &a->sin6_addr, host, sizeof host);
+        port = ntohs(a->sin6_port);
+    } else {
+        const struct sockaddr_in *a = (const struct sockaddr_in *)addr;
+        inet_ntop(AF_INET, &a->sin_addr, host, sizeof host);
+        port = ntohs(a->sin_port);
+    }
+    return Py_BuildValue("(si)", host, port);
+}
+
+static void dispatch_slow(Receiver *r) {
+    if (!r->n_slow) return;
+    flush_state(r);
+    PyObject *list = PyList_New(r->n_slow);
+    if (!list) goto fail;
+    for (int k = 0; k < r->n_slow; k++) {
+        PyObject *t = Py_BuildValue("(y#N)", (const char *)r->arena + r->slow_off[k], (Py_ssize_t)r->slow_len[k],
+                                    peer_tuple(&r->slow_addr[k]));
+        if (!t) {
+            Py_DECREF(list);
+            goto fail;
+        }
+        PyList_SET_ITEM(list, k, t);
+    }
+    r->slow += r->n_slow;
+    r->n_slow = 0;
+    r->arena_used = 0;
+    PyObject *res = PyObject_CallFunctionObjArgs(r->on_slow, list, NULL);
+    Py_DECREF(list);
+    if (!res) {
+        r->handler_errors++;
+        PyErr_WriteUnraisable(r->on_slow);
+        return;
+    }
+    Py_DECREF(res);
+    return;
+fail:
+    r->n_slow = 0;
+    r->arena_used = 0;
+    r->handler_errors++;
+    PyErr_WriteUnraisable(r->on_slow);
+}
+
+/* ------------------------------------------------------------------ the loop */
+static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
+    if (r->running) {
+        PyErr_SetString(PyExc_RuntimeError, "already running");
+        return NULL;
+    }
+    r->running = 1;
+    PyThreadState *ts = PyEval_SaveThread();
+    while (!r->stop) {
+        struct pollfd pfd = {r->fd, POLLIN, 0};
+        int ready = poll(&pfd, 1, POLL_MS);
+        if (r->stop) break;
+        int batch = 0, to_python = 0;
+        if (ready > 0) {
+            while (batch < MAX_BATCH) {
+                struct sockaddr_storage addr;
+                socklen_t alen = sizeof addr;
+#ifdef _WIN32
+                int n = recvfrom(r->fd, (char *)r->scratch, MAX_DATAGRAM, 0, (struct sockaddr *)&addr, &alen);
+                if (n < 0) break;
+#else
+                ssize_t n = recvfrom(r->fd, r->scratch, MAX_DATAGRAM, MSG_DONTWAIT, (struct sockaddr *)&addr, &alen);
+                if (n < 0) {
+                    if (errno == EINTR) continue;
+                    if (errno == EAGAIN || errno == EWOULDBLOCK) break;
+                    if (errno == EBADF) { r->stop = 1; break; }
+                    continue; /* e.g. ECONNREFUSED for an earlier reply */
+                }
+#endif
+                batch++;
+                r->packets++;
+                r->bytes += n;
+                if (!allowed(r, &addr)) {
+                    r->denied++;
+                    continue;
+                }
+                if (!to_python && fast_handle(r, r->scratch, (int)n)) {
+                    r->fast++;
+                    continue;
+                }
+                to_python = 1; /* keep arrival order: the rest of this batch goes to Python too */
+                if (r->arena_used + (size_t)n > SLOW_ARENA || r->n_slow == MAX_BATCH) {
+                    PyEval_RestoreThread(ts);
+                    dispatch_slow(r);
+                    ts = PyEval_SaveThread();
+                }
+                memcpy(r->arena + r->arena_used, r->scratch, (size_t)n);
+                r->slow_off[r->n_slow] = r->arena_used;
+                r->slow_len[r->n_slow] = (size_t)n;
+                r->slow_addr[r->n_slow] = addr;
+                r->n_slow++;
+                r->arena_used += (size_t)n;
+            }
+        }
+        if (r->n_slow || (r->any_dirty && now_s() - r->last_flush >= STATE_PERIOD_S)) {
+            PyEval_RestoreThread(ts);
+            if (r->n_slow)
+                dispatch_slow(r);
+            else
+                flush_state(r);
+            ts = PyEval_SaveThread();
+        }
+    }
+    PyEval_RestoreThread(ts);
+    flush_state(r);
+    r->running = 0;
+    Py_RETURN_NONE;
+}
+
+static PyObject *Receiver_stop(Receiver *r, PyObject *unused) {
+    r->stop = 1;
+    Py_RETURN_NONE;
+}
+
+/* ------------------------------------------------------------------ construction */
+static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
+    static char *names[] = {"fd", "core", "table", "balance_min", "balance_max", "on_slow", "on_state", "allow", NULL};
+    long long fd;
+    PyObject *core, *table, *on_slow, *on_state, *allow;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "LOOddOOO", names, &fd, &core, &table, &r->bal_min, &r->bal_max,
+                                     &on_slow, &on_state, &allow))
+        return -1;
+    r->fd = (sock_t)fd;
+    r->api = NULL;
+    r->core_ptr = NULL;
+    r->channels = 0;
+    if (core != Py_None) { /* None: no fast path, every datagram goes to Python */
+        r->api = (const vs_core_api_t *)PyCapsule_Import(VS_CORE_CAPSULE, 0);
+        if (!r->api) return -1;
+        r->core_ptr = (struct vs_core *)core;
+        r->channels = r->api->channels(r->core_ptr);
+    }
+    Py_INCREF(core);
+    Py_XSETREF(r->core, core);
+    Py_INCREF(on_slow);
+    Py_XSETREF(r->on_slow, on_slow);
+    Py_INCREF(on_state);
+    Py_XSETREF(r->on_state, on_state);
+    /* table: iterable of (address: bytes, method: int, channel: int) */
+    memset(r->table, 0, sizeof r->table);
+    PyObject *it = PyObject_GetIter(table);
+    if (!it) return -1;
+    PyObject *item;
+    int count = 0;
+    while ((item = PyIter_Next(it))) {
+        const char *addr;
+        Py_ssize_t alen;
+        int method, channel;
+        if (!PyArg_ParseTuple(item, "y#ii", &addr, &alen, &method, &channel)) {
+            Py_DECREF(item);
+            Py_DECREF(it);
+            return -1;
+        }
+        Py_DECREF(item);
+        if (!r->api || alen < 1 || alen >= MAX_ADDR || channel >= r->channels || ++count > TABLE_SIZE / 4) {
+            Py_DECREF(it);
+            PyErr_SetString(PyExc_ValueError, "fast-path table: bad address, channel or too many entries");
+            return -1;
+        }
+        uint32_t i = hash_bytes(addr, (int)alen) & (TABLE_SIZE - 1);
+        while (r->table[i].len) i = (i + 1) & (TABLE_SIZE - 1);
+        memcpy(r->table[i].address, addr, (size_t)alen);
+        r->table[i].len = (int)alen;
+        r->table[i].method = method;
+        r->table[i].channel = channel;
+    }
+    Py_DECREF(it);
+    if (PyErr_Occurred()) return -1;
+    /* allow: None, or iterable of (version 4|6, packed network bytes, prefix length) */
+    r->n_nets = -1;
+    if (allow != Py_None) {
+        r->n_nets = 0;
+        it = PyObject_GetIter(allow);
+        if (!it) return -1;
+        while ((item = PyIter_Next(it))) {
+            int version, prefix;
+            const char *net;
+            Py_ssize_t nlen;
+            if (!PyArg_ParseTuple(item, "iy#i", &version, &net, &nlen, &prefix) || r->n_nets == MAX_NETS ||
+                nlen != (version == 4 ? 4 : 16) || prefix < 0 || prefix > 8 * nlen) {
+                Py_DECREF(item);
+                Py_DECREF(it);
+                if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "allow: bad network or too many");
+                return -1;
+            }
+            Py_DECREF(item);
+            net_t *dst = &r->nets[r->n_nets++];
+            dst->family = version;
+            memset(dst->net, 0, sizeof dst->net);
+            memcpy(dst->net, net, (size_t)nlen);
+            dst->prefix = prefix;
+        }
+        Py_DECREF(it);
+        if (PyErr_Occurred()) return -1;
+    }
+    if (!r->scratch) r->scratch = PyMem_RawMalloc(MAX_DATAGRAM);
+    if (!r->arena) r->arena = PyMem_RawMalloc(SLOW_ARENA);
+    if (!r->scratch || !r->arena) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    return 0;
+}
+
+static void Receiver_dealloc(Receiver *r) {
+    Py_XDECREF(r->core);
+    Py_XDECREF(r->on_slow);
+    Py_XDECREF(r->on_state);
+    PyMem_RawFree(r->scratch);
+    PyMem_RawFree(r->arena);
+    Py_TYPE(r)->tp_free((PyObject *)r);
+}
+
+static PyObject *Receiver_counters(Receiver *r, PyObject *unused) {
+    return Py_BuildValue("{sLsLsLsLsLsLsL}", "packets", r->packets, "bytes", r->bytes, "fast", r->fast, "slow",
+                         r->slow, "denied", r->denied, "ring_full", r->ring_full, "handler_errors",
+                         r->handler_errors);
+}
+
+static PyMethodDef Receiver_methods[] = {
+    {"run", (PyCFunction)Receiver_run, METH_NOARGS, "receive until stop(); call from the receive thread"},
+    {"stop", (PyCFunction)Receiver_stop, METH_NOARGS, "ask run() to return (within 100 ms)"},
+    {"counters", (PyCFunction)Receiver_counters, METH_NOARGS, "packets, bytes, fast, slow, denied, ..."},
+    {NULL}};
+
+static PyTypeObject ReceiverType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "vibsynth.control.osc._fast.Receiver",
+    .tp_basicsize = sizeof(Receiver),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "OSC UDP receive loop with a compiled fast path for knob messages.",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Receiver_init,
+    .tp_dealloc = (destructor)Receiver_dealloc,
+    .tp_methods = Receiver_methods,
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_fast", "OSC UDP fast path", -1, NULL};
+
+PyMODINIT_FUNC PyInit__fast(void) {
+    if (PyType_Ready(&ReceiverType) < 0) return NULL;
+    PyObject *m = PyModule_Create(&module);
+    if (!m) return NULL;
+    Py_INCREF(&ReceiverType);
+    PyModule_AddObject(m, "Receiver", (PyObject *)&ReceiverType);
+    PyModule_AddIntConstant(m, "M_INTENSITY", M_INTENSITY);
+    PyModule_AddIntConstant(m, "M_BALANCE", M_BALANCE);
+    PyModule_AddIntConstant(m, "M_TEXTURE", M_TEXTURE);
+    PyModule_AddIntConstant(m, "MAX_BATCH", MAX_BATCH);
+    return m;
+}

@@ -1,0 +1,49 @@
+"""Stream clock: OSC timetags (NTP time) -> engine stream frames.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any, Callable
+
+
+class StreamClock:
+    """Maps wall time (``time.time()``) to the engine's stream position (frames).
+
+    The engine publishes ``frame_position`` in whole blocks, so one sample
+    ``frame/fs - wall`` is late by up to a block; the estimate keeps the largest
+    (least late) offset seen, decaying slowly (``drift`` s/s, 1000 ppm: more than sound
+    cards and JACK's dummy driver drift) so that the drift between the audio clock and
+    the system clock is followed, and resets when the stream jumps (restart). The OSC
+    handler samples it with every batch of packets it receives.
+    """
+
+    def __init__(self, engine: Any, *, drift: float = 1e-3, reset_s: float = 0.25,
+                 wall: Callable[[], float] = time.time) -> None:
+        self.engine = engine
+        self.drift = drift
+        self.reset_s = reset_s
+        self.wall = wall
+        self._offset: float | None = None
+        self._last_wall = 0.0
+
+    def sample(self) -> tuple[int, float]:
+        """Read the engine clock once; return ``(frame_position, wall_time)``."""
+        frame = int(self.engine.frame_position)
+        now = self.wall()
+        offset = frame / float(self.engine.fs) - now
+        est = self._offset
+        if est is None:
+            est = offset
+        else:
+            est -= self.drift * max(0.0, now - self._last_wall)
+            if offset > est or offset < est - self.reset_s:
+                est = offset
+        self._offset = est
+        self._last_wall = now
+        return frame, now
+
+    def frame_at(self, unix_time: float) -> tuple[int, int]:
+        """Stream frame for a wall time; returns ``(frame, current_frame_position)``."""
+        current, _ = self.sample()
+        assert self._offset is not None
+        return int(round((unix_time + self._offset) * float(self.engine.fs))), current

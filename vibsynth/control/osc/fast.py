@@ -1,0 +1,76 @@
+"""The OSC fast path: which addresses the compiled UDP receive loop handles on its own.
+
+:mod:`vibsynth.control.osc._fast` receives every UDP datagram with the GIL released.
+Messages of the shapes a VR app or controller sends every frame (``intensity f``,
+``balance f``, ``texture ff`` at an exact address, global or per channel, with finite
+values inside the live ranges) go from the socket straight into the engine's command
+ring; everything else reaches :class:`~vibsynth.control.osc.handler.OscHandler` in arrival order.
+The controller learns of fast-path moves through :meth:`Controller.record` before the
+handler sees the next Python batch and at most 20 ms later otherwise, so ``get``,
+``/status`` and ``/notify`` stay right.
+"""
+from __future__ import annotations
+
+import ipaddress
+from typing import Any, Callable, Iterable
+
+from vibsynth.control.controller import Controller
+from vibsynth.control.osc import _fast as _oscfast
+from vibsynth.control.osc.address import AddressSpace
+
+__all__ = ["FAST_METHODS", "fast_table", "allow_networks", "make_receiver"]
+
+FAST_METHODS = {"intensity": _oscfast.M_INTENSITY, "balance": _oscfast.M_BALANCE, "texture": _oscfast.M_TEXTURE}
+"""Methods the compiled loop decodes itself (when the arguments are valid)."""
+
+SOURCE = "osc"
+
+
+def fast_table(space: AddressSpace) -> list[tuple[bytes, int, int]]:
+    """``(address, method code, channel or -1)`` for every fast-path address of ``space``."""
+    table = []
+    for address in space.addresses:
+        (route,) = space.match(address)
+        code = FAST_METHODS.get(route.method)
+        if code is not None:
+            table.append((address.encode("ascii"), code, -1 if route.channel is None else route.channel))
+    return table
+
+
+def allow_networks(allow: Iterable[Any] | None) -> list[tuple[int, bytes, int]] | None:
+    """The allow list as ``(IP version, packed network, prefix length)`` (None = everyone).
+
+    Accepts IP strings, CIDR strings and :mod:`ipaddress` addresses or networks.
+    """
+    if allow is None:
+        return None
+    out = []
+    for entry in allow:
+        net = ipaddress.ip_network(entry if not isinstance(entry, str) else entry.split("%")[0], strict=False)
+        out.append((net.version, net.network_address.packed, net.prefixlen))
+    return out
+
+
+def make_receiver(
+    fd: int,
+    on_slow: Callable[[list[tuple[bytes, tuple[str, int]]]], None],
+    allow: Iterable[Any] | None,
+    *,
+    controller: Controller | None = None,
+    space: AddressSpace | None = None,
+) -> Any:
+    """A compiled receive loop on socket ``fd`` (its ``run()`` blocks until ``stop()``).
+
+    With a controller whose engine has a compiled core, and an address space, the fast path
+    is on; otherwise every datagram goes to ``on_slow``.
+    """
+    core = getattr(getattr(controller, "engine", None), "_core", None)
+    if controller is None or space is None or core is None:
+        return _oscfast.Receiver(fd, None, [], 0.0, 0.0, on_slow, lambda updates, seq: None, allow_networks(allow))
+    limits = controller.limits
+
+    def on_state(updates: list[tuple[str, int, float]], last_seq: int) -> None:
+        controller.record(updates, last_seq, source=SOURCE)
+
+    return _oscfast.Receiver(fd, core, fast_table(space), limits.balance_min, limits.balance_max, on_slow,
+                             on_state, allow_networks(allow))

@@ -1,0 +1,157 @@
+"""The OSC server: a handler behind its transports, with the notify and sync workers.
+"""
+from __future__ import annotations
+
+import logging
+from functools import partial
+from typing import Sequence
+
+from vibsynth.control.controller import Controller
+from vibsynth.control.osc.address import normalize_prefix
+from vibsynth.control.osc.fast import make_receiver
+from vibsynth.control.osc.handler import OscHandler
+from vibsynth.control.osc.replies import _LOOPBACK
+from vibsynth.control.osc.speed import SpeedCurve
+from vibsynth.control.osc.transport import (
+    DEFAULT_RCVBUF,
+    TCP_IDLE_TIMEOUT_S,
+    TCP_MAX_CONNECTIONS,
+    TCP_MAX_PER_PEER,
+    TcpSlipTransport,
+    TransportStats,
+    UdpTransport,
+)
+from vibsynth.control.osc.workers import Notifier, PeerLike, SyncWorker
+from vibsynth.errors import ConfigError
+from vibsynth.settings.allow_list import resolve_allow_list
+
+log = logging.getLogger(__name__)
+
+
+class OscServer:
+    """The OSC control server: transports + handler + workers (the adapter's ControlServer).
+
+    Parameters
+    ----------
+    controller : Controller
+    host, port : str, int
+    prefix, allow, reply_port, schedule_horizon_s, notify_rate_hz, tcp, speed_curve
+        See the ``osc:`` config section and docs/osc.md.
+    tcp_max_connections, tcp_max_per_peer, tcp_idle_timeout_s
+        TCP connection limits (see :class:`~vibsynth.control.osc.transport.TcpSlipTransport`).
+    block_size : int, optional
+        Reported in status when the engine does not say.
+    """
+
+    name = "osc"
+
+    def __init__(
+        self,
+        controller: Controller,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 9570,
+        prefix: str = "/vibsynth",
+        allow: Sequence[str] | None = None,
+        reply_port: int | None = None,
+        schedule_horizon_s: float = 10.0,
+        notify_rate_hz: float = 30.0,
+        tcp: bool = False,
+        speed_curve: SpeedCurve | None = None,
+        block_size: int | None = None,
+        rcvbuf: int = DEFAULT_RCVBUF,
+        tcp_max_connections: int = TCP_MAX_CONNECTIONS,
+        tcp_max_per_peer: int = TCP_MAX_PER_PEER,
+        tcp_idle_timeout_s: float = TCP_IDLE_TIMEOUT_S,
+    ) -> None:
+        self.controller = controller
+        self.stats = TransportStats()
+        allow_set = resolve_allow_list(allow)
+        prefix = normalize_prefix(prefix)
+        self.notifier = Notifier(controller, prefix, rate_hz=notify_rate_hz)
+        self.sync_worker = SyncWorker(controller, self._reply_synced, timeout_s=schedule_horizon_s + 2.0)
+        self.handler = OscHandler(
+            controller, prefix=prefix, speed_curve=speed_curve, schedule_horizon_s=schedule_horizon_s,
+            notifier=self.notifier, sync_worker=self.sync_worker, block_size=block_size,
+            extra_status=self._status_extras,
+        )
+        self.udp = UdpTransport(host, port, self.handler.handle_batch, allow=allow_set, reply_port=reply_port,
+                                rcvbuf=rcvbuf, stats=self.stats,
+                                receiver_factory=partial(make_receiver, controller=controller, space=self.handler.space))
+        self.tcp = (TcpSlipTransport(host, port, self.handler.handle_batch, allow=allow_set, stats=self.stats,
+                                     on_close=self.notifier.unsubscribe, max_connections=tcp_max_connections,
+                                     max_per_peer=tcp_max_per_peer, idle_timeout_s=tcp_idle_timeout_s)
+                    if tcp else None)
+        self._started = False
+
+    def _reply_synced(self, peer: PeerLike, sync_id: int, ok: bool) -> None:
+        self.handler.reply_synced(peer, sync_id, ok)
+
+    def _status_extras(self) -> list[tuple[str, object]]:
+        s = self.stats
+        return self._transport_status() + [("tcp_refused", s.tcp_refused), ("tcp_idle_closed", s.tcp_idle_closed)]
+
+    def counters(self) -> dict[str, int]:
+        """Transport counters of both transports: the TCP ones in :attr:`stats`, the UDP ones in
+        the compiled receive loop (``fast_path``: messages it handled without Python)."""
+        s, udp = self.stats, self.udp.counters()
+        return {"packets": s.packets + udp.get("packets", 0), "bytes": s.bytes + udp.get("bytes", 0),
+                "denied": s.denied + udp.get("denied", 0), "fast_path": udp.get("fast", 0),
+                "replies": s.replies, "send_errors": s.send_errors}
+
+    def _transport_status(self) -> list[tuple[str, object]]:
+        c = self.counters()
+        return [("packets", c["packets"]), ("denied", c["denied"]), ("fast_path", c["fast_path"]),
+                ("replies", c["replies"]), ("send_errors", c["send_errors"]), ("rcvbuf", self.udp.rcvbuf)]
+
+    @property
+    def port(self) -> int:
+        """The bound UDP port (useful with port 0)."""
+        return self.udp.port
+
+    def start(self) -> None:
+        """Bind the sockets and start the receive, notify and sync threads.
+
+        Raises
+        ------
+        ConfigError
+            If the address cannot be bound (e.g. port in use).
+        """
+        try:
+            self.udp.open()
+            if self.tcp is not None:
+                self.tcp.port = self.udp.port
+                self.tcp.open()
+        except OSError as exc:
+            self.udp.stop()
+            raise ConfigError(f"OSC: cannot listen on {self.udp.host}:{self.udp.port}: {exc.strerror or exc} "
+                              "(set osc.port or --osc-port)") from None
+        self.notifier.start()
+        self.sync_worker.start()
+        self.udp.start()
+        if self.tcp is not None:
+            self.tcp.start()
+        self._started = True
+        log.info("%s", self.describe())
+
+    def stop(self) -> None:
+        """Stop every thread and close the sockets (idempotent)."""
+        self.udp.stop()
+        if self.tcp is not None:
+            self.tcp.stop()
+        self.notifier.stop()
+        self.sync_worker.stop()
+        self.handler.close()
+        self._started = False
+
+    def describe(self) -> str:
+        """One line for the start-up banner."""
+        host = self.udp.host
+        text = f"OSC on udp://{host}:{self.udp.port}{self.handler.prefix or '/'}"
+        if self.tcp is not None:
+            text += f" and tcp://{host}:{self.udp.port} (SLIP)"
+        if self.udp.rcvbuf:
+            text += f", receive buffer {self.udp.rcvbuf // 1024} KiB"
+        if host not in _LOOPBACK:
+            text += ", reachable from the network" + (" (allow-list)" if self.udp.allow else "")
+        return text

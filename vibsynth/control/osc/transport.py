@@ -1,0 +1,527 @@
+"""OSC transports: UDP (one receive thread, large receive buffer) and optional TCP with SLIP framing.
+
+Transports know nothing of OSC addresses: they receive packets, drop those from
+clients outside the allow-list (counted), and hand batches of ``(data, peer)`` to a
+callback on their single receive thread: after waiting for the first packet, the UDP
+thread drains whatever else is already queued in the socket (up to 256 datagrams),
+so the handler can coalesce moves that arrived together. The UDP receive loop is
+compiled (:mod:`vibsynth.control.osc._fast`): it runs without the GIL and, when the
+OSC server gives it a fast path (:mod:`vibsynth.control.osc.fast`), puts the common knob
+messages straight into the engine's command ring. ``peer.send(data)`` replies to the sender (UDP:
+its address, or the configured reply port on its host; TCP: the same connection).
+
+Limits: TCP connections are bounded (:data:`TCP_MAX_CONNECTIONS` in all,
+:data:`TCP_MAX_PER_PEER` per client address) and closed after :data:`TCP_IDLE_TIMEOUT_S`
+without a complete packet, so stalled clients cannot lock others out. The allow-list
+is parsed by :func:`parse_allow_list`, the very function that validates ``osc.allow``
+in the config, so a config that passes always starts the server.
+"""
+from __future__ import annotations
+
+import logging
+import selectors
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from vibsynth.control.osc.fast import make_receiver
+from vibsynth.settings.allow_list import AllowList
+
+__all__ = [
+    "TransportStats",
+    "UdpPeer",
+    "TcpPeer",
+    "UdpTransport",
+    "TcpSlipTransport",
+    "slip_encode",
+    "SlipDecoder",
+    "TCP_MAX_CONNECTIONS",
+    "TCP_MAX_PER_PEER",
+    "TCP_IDLE_TIMEOUT_S",
+    "DEFAULT_RCVBUF",
+]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RCVBUF = 4 * 1024 * 1024
+MAX_DATAGRAM = 65536
+
+TCP_MAX_CONNECTIONS = 64
+"""Open TCP connections in all (``osc.tcp_max_connections``); twice the 32 /notify subscribers."""
+TCP_MAX_PER_PEER = 4
+"""Open TCP connections from one client IP address (``osc.tcp_max_per_peer``)."""
+TCP_IDLE_TIMEOUT_S = 30.0
+"""A TCP connection without a complete packet for this long is closed (``osc.tcp_idle_timeout_s``)."""
+_POLL_S = 0.25
+
+
+BatchHandler = Callable[[list], None]
+"""``handler([(data, peer), ...])``, called on the receive thread."""
+
+ReceiverFactory = Callable[[int, Callable[[list], None], Any], Any]
+"""``factory(fd, on_datagrams, allow) -> receiver`` with ``run()``, ``stop()``, ``counters()``."""
+
+
+@dataclass
+class TransportStats:
+    """Counters kept by the receive threads (read by status queries without a lock)."""
+
+    packets: int = 0
+    bytes: int = 0
+    denied: int = 0
+    send_errors: int = 0
+    replies: int = 0
+    tcp_connections: int = 0
+    oversized_frames: int = 0
+    handler_errors: int = 0
+    tcp_refused: int = 0
+    tcp_idle_closed: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class UdpPeer:
+    """A UDP client: replies go to ``reply_to`` through the server socket."""
+
+    address: tuple[str, int]
+    reply_to: tuple[str, int]
+    transport: "UdpTransport" = field(compare=False, hash=False, repr=False)
+    datagram = True  # replies to off-host peers are size-limited (OscHandler)
+
+    @property
+    def key(self) -> tuple:
+        return ("udp", self.reply_to)
+
+    def send(self, data: bytes) -> bool:
+        return self.transport.send_to(data, self.reply_to)
+
+
+class TcpPeer:
+    """A TCP client connection: replies are SLIP frames on the same connection.
+
+    ``keep_alive`` (set for /notify subscribers) exempts it from the idle timeout.
+    """
+
+    datagram = False
+
+    def __init__(self, sock: socket.socket, address: tuple[str, int], stats: TransportStats) -> None:
+        self.sock = sock
+        self.address = address
+        self.closed = False
+        self.keep_alive = False
+        self._stats = stats
+        self._lock = threading.Lock()
+
+    @property
+    def key(self) -> tuple:
+        return ("tcp", self.address)
+
+    def send(self, data: bytes) -> bool:
+        """Queue a SLIP frame on the (non-blocking) connection; a client that stopped reading is dropped."""
+        if self.closed:
+            return False
+        frame = slip_encode(data)
+        try:
+            with self._lock:
+                self.sock.sendall(frame)
+            self._stats.replies += 1
+            return True
+        except OSError:  # BlockingIOError: its buffer is full (possibly mid-frame): drop it
+            self._stats.send_errors += 1
+            self.closed = True
+            return False
+
+
+# ---------------------------------------------------------------------- SLIP
+_END, _ESC, _ESC_END, _ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
+
+
+def slip_encode(data: bytes) -> bytes:
+    """Frame a packet with SLIP (RFC 1055, double-END as OSC 1.1 recommends)."""
+    body = data.replace(b"\xdb", b"\xdb\xdd").replace(b"\xc0", b"\xdb\xdc")
+    return b"\xc0" + body + b"\xc0"
+
+
+class SlipDecoder:
+    """Incremental SLIP decoder; frames longer than ``max_frame`` are discarded (counted)."""
+
+    def __init__(self, max_frame: int = MAX_DATAGRAM) -> None:
+        self.max_frame = max_frame
+        self._buf = bytearray()
+        self._escape = False
+        self._overflow = False
+        self.oversized = 0
+
+    @property
+    def pending(self) -> bool:
+        """True while part of a frame has been received (a frame is open)."""
+        return bool(self._buf) or self._escape or self._overflow
+
+    def feed(self, chunk: bytes) -> list[bytes]:
+        """Add received bytes; return the complete frames (possibly none)."""
+        frames = []
+        for byte in chunk:
+            if byte == _END:
+                if self._buf and not self._overflow:
+                    frames.append(bytes(self._buf))
+                self._buf.clear()
+                self._escape = self._overflow = False
+                continue
+            if self._escape:
+                byte = _END if byte == _ESC_END else _ESC if byte == _ESC_ESC else byte
+                self._escape = False
+            elif byte == _ESC:
+                self._escape = True
+                continue
+            if len(self._buf) >= self.max_frame:
+                if not self._overflow:
+                    self.oversized += 1
+                self._overflow = True
+                continue
+            self._buf.append(byte)
+        return frames
+
+
+# ---------------------------------------------------------------------- UDP
+class UdpTransport:
+    """UDP server socket with one receive thread.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Bind address (port 0 picks a free port; see :attr:`port` after :meth:`open`).
+    on_batch : callable
+        ``on_batch([(data, peer), ...])``, called on the receive thread.
+    allow : AllowList or None
+        Client addresses accepted (None = all); see :func:`parse_allow_list`.
+    reply_port : int or None
+        Send replies to this port on the sender's host instead of the sender's port.
+    rcvbuf : int
+        Requested receive buffer size in bytes (the kernel may cap it; see :attr:`rcvbuf`).
+    receiver_factory : callable, optional
+        ``factory(fd, on_datagrams, allow) -> receiver`` building the compiled receive loop
+        (:func:`vibsynth.control.osc.fast.make_receiver`; the OSC server passes one with the
+        fast path on). Default: the loop without a fast path.
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        on_batch: BatchHandler,
+        *,
+        allow: AllowList | None = None,
+        reply_port: int | None = None,
+        rcvbuf: int = DEFAULT_RCVBUF,
+        stats: TransportStats | None = None,
+        receiver_factory: ReceiverFactory | None = None,
+    ) -> None:
+        self.host = host
+        self.port = int(port)
+        self.on_batch = on_batch
+        self.allow = allow
+        self.reply_port = reply_port
+        self.requested_rcvbuf = rcvbuf
+        self.rcvbuf = 0
+        self.stats = stats or TransportStats()
+        self.receiver_factory = receiver_factory or make_receiver
+        self._receiver: Any = None
+        self.sock: socket.socket | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    def open(self) -> None:
+        """Create and bind the socket (raises OSError, e.g. when the port is taken)."""
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            for option in (getattr(socket, "SO_RCVBUFFORCE", None), socket.SO_RCVBUF):
+                if option is None:
+                    continue
+                try:
+                    sock.setsockopt(socket.SOL_SOCKET, option, self.requested_rcvbuf)
+                    break
+                except OSError:
+                    continue
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1024 * 1024)
+            sock.bind((self.host, self.port))
+        except OSError:
+            sock.close()
+            raise
+        sock.setblocking(False)
+        self.rcvbuf = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        self.port = sock.getsockname()[1]
+        self.sock = sock
+
+    def start(self) -> None:
+        """Open (if needed) and start the receive thread."""
+        if self.sock is None:
+            self.open()
+        self._stop.clear()
+        assert self.sock is not None
+        self._receiver = self.receiver_factory(self.sock.fileno(), self._on_datagrams, self.allow)
+        self._thread = threading.Thread(target=self._run, name="vibsynth-osc-udp", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the receive thread (within 0.1 s) and close the socket."""
+        self._stop.set()
+        if self._receiver is not None:
+            self._receiver.stop()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+    def send_to(self, data: bytes, address: tuple[str, int]) -> bool:
+        """Send one datagram; failures are counted, never raised."""
+        sock = self.sock
+        if sock is None:
+            return False
+        try:
+            sock.sendto(data, address)
+            self.stats.replies += 1
+            return True
+        except OSError:
+            self.stats.send_errors += 1
+            return False
+
+    def _run(self) -> None:
+        sock = self.sock
+        assert sock is not None
+        receiver = self._receiver
+        if receiver is not None:
+            receiver.run()  # the compiled loop; returns after stop()
+
+    def counters(self) -> dict[str, int]:
+        """The receive loop's counters: packets, bytes, fast (handled in C), slow, denied, ..."""
+        receiver = self._receiver
+        return receiver.counters() if receiver is not None else {}
+
+    def _on_datagrams(self, items: list[tuple[bytes, tuple[str, int]]]) -> None:
+        """Datagrams the compiled loop hands to Python (in arrival order), on the receive thread."""
+        batch = []
+        for data, address in items:
+            reply_to = address if self.reply_port is None else (address[0], self.reply_port)
+            batch.append((data, UdpPeer(address, reply_to, self)))
+        try:
+            self.on_batch(batch)
+        except Exception:  # the receive thread must survive anything
+            self.stats.handler_errors += 1
+            log.exception("OSC: handler failed on a batch of %d packet(s)", len(batch))
+
+
+# ---------------------------------------------------------------------- TCP
+class _Connection:
+    """One TCP connection: its peer, SLIP decoder and the time of its last complete packet."""
+
+    __slots__ = ("peer", "decoder", "last_packet")
+
+    def __init__(self, peer: TcpPeer, decoder: SlipDecoder, now: float) -> None:
+        self.peer = peer
+        self.decoder = decoder
+        self.last_packet = now
+
+
+class TcpSlipTransport:
+    """TCP listener with SLIP-framed OSC packets; one selector thread serves every connection.
+
+    Stalled clients cannot lock others out: a new connection is refused (closed at
+    once, counted in ``tcp_refused``) when its address already holds ``max_per_peer``
+    connections or ``max_connections`` are open, and a connection that delivered no
+    complete packet for ``idle_timeout_s`` is closed (``tcp_idle_closed``). A
+    ``/notify`` subscriber (``peer.keep_alive``) may stay silent as long as it likes,
+    but not in the middle of a frame.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Bind address (port 0 picks a free port).
+    on_batch : callable
+        ``on_batch([(frame, peer), ...])``, called on the selector thread.
+    allow : AllowList or None
+        Client addresses accepted (None = all).
+    max_connections : int
+        Open connections in all (:data:`TCP_MAX_CONNECTIONS`).
+    max_per_peer : int
+        Open connections from one client IP address (:data:`TCP_MAX_PER_PEER`).
+    idle_timeout_s : float
+        Seconds without a complete packet before a connection is closed (:data:`TCP_IDLE_TIMEOUT_S`).
+    stats : TransportStats, optional
+    on_close : callable, optional
+        Called with the peer of every closed connection.
+    clock : callable
+        Monotonic clock in seconds (injectable for tests).
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        on_batch: BatchHandler,
+        *,
+        allow: AllowList | None = None,
+        max_connections: int = TCP_MAX_CONNECTIONS,
+        max_per_peer: int = TCP_MAX_PER_PEER,
+        idle_timeout_s: float = TCP_IDLE_TIMEOUT_S,
+        stats: TransportStats | None = None,
+        on_close: Callable[[TcpPeer], None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.host = host
+        self.port = int(port)
+        self.on_batch = on_batch
+        self.on_close = on_close
+        self.allow = allow
+        self.max_connections = int(max_connections)
+        self.max_per_peer = int(max_per_peer)
+        self.idle_timeout_s = float(idle_timeout_s)
+        self.clock = clock
+        self.stats = stats or TransportStats()
+        self.sock: socket.socket | None = None
+        self._selector: selectors.DefaultSelector | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._peers: dict[socket.socket, _Connection] = {}
+
+    def open(self) -> None:
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind((self.host, self.port))
+            sock.listen(64)
+        except OSError:
+            sock.close()
+            raise
+        sock.setblocking(False)
+        self.port = sock.getsockname()[1]
+        self.sock = sock
+
+    def start(self) -> None:
+        if self.sock is None:
+            self.open()
+        assert self.sock is not None
+        self._selector = selectors.DefaultSelector()
+        self._selector.register(self.sock, selectors.EVENT_READ)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="vibsynth-osc-tcp", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        for conn in list(self._peers):
+            self._drop(conn)
+        if self._selector is not None:
+            self._selector.close()
+            self._selector = None
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+    @property
+    def connections(self) -> int:
+        """Open connections."""
+        return len(self._peers)
+
+    def _drop(self, conn: socket.socket) -> None:
+        entry = self._peers.pop(conn, None)
+        try:
+            if self._selector is not None:
+                self._selector.unregister(conn)
+        except (KeyError, ValueError):
+            pass
+        conn.close()
+        if entry is not None:
+            entry.peer.closed = True
+            if self.on_close is not None:
+                self.on_close(entry.peer)
+
+    def _refusal(self, ip: str) -> str | None:
+        """Why a new connection from ``ip`` is refused (None = accepted)."""
+        if self.allow is not None and ip not in self.allow:
+            return "not in osc.allow"
+        if len(self._peers) >= self.max_connections:
+            return f"{self.max_connections} connections open (the limit)"
+        if sum(1 for c in self._peers.values() if c.peer.address[0] == ip) >= self.max_per_peer:
+            return f"{self.max_per_peer} connections open from this address (the limit per client)"
+        return None
+
+    def _accept(self) -> None:
+        assert self.sock is not None and self._selector is not None
+        try:
+            conn, address = self.sock.accept()
+        except OSError:
+            return
+        reason = self._refusal(address[0])
+        if reason is not None:
+            if reason.startswith("not in"):
+                self.stats.denied += 1
+            else:
+                self.stats.tcp_refused += 1
+            log.debug("OSC: refused a TCP connection from %s: %s", address[0], reason)
+            conn.close()
+            return
+        conn.setblocking(False)
+        self.stats.tcp_connections += 1
+        self._peers[conn] = _Connection(TcpPeer(conn, address[:2], self.stats), SlipDecoder(), self.clock())
+        self._selector.register(conn, selectors.EVENT_READ)
+
+    def _expire_idle(self) -> None:
+        """Close connections without a complete packet for ``idle_timeout_s``."""
+        now = self.clock()
+        for conn, entry in list(self._peers.items()):
+            if now - entry.last_packet < self.idle_timeout_s:
+                continue
+            if entry.peer.keep_alive and not entry.decoder.pending:
+                continue
+            self.stats.tcp_idle_closed += 1
+            log.debug("OSC: closed the TCP connection of %s (no complete packet for %.0f s)",
+                      entry.peer.address[0], now - entry.last_packet)
+            self._drop(conn)
+
+    def _receive(self, conn: socket.socket) -> None:
+        """Read what a connection sent and hand its complete frames to the handler."""
+        try:
+            chunk = conn.recv(MAX_DATAGRAM)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            chunk = b""
+        if not chunk:
+            self._drop(conn)
+            return
+        entry = self._peers[conn]
+        peer, decoder = entry.peer, entry.decoder
+        before = decoder.oversized
+        frames = decoder.feed(chunk)
+        self.stats.oversized_frames += decoder.oversized - before
+        for frame in frames:
+            self.stats.packets += 1
+            self.stats.bytes += len(frame)
+        if frames:
+            entry.last_packet = self.clock()
+            try:
+                self.on_batch([(frame, peer) for frame in frames])
+            except Exception:
+                self.stats.handler_errors += 1
+                log.exception("OSC: handler failed on TCP frames from %s", peer.address[0])
+        if peer.closed:
+            self._drop(conn)
+
+    def _run(self) -> None:
+        assert self._selector is not None
+        while not self._stop.is_set():
+            for key, _ in self._selector.select(timeout=_POLL_S):
+                if key.fileobj is self.sock:
+                    self._accept()
+                elif key.fileobj in self._peers:
+                    assert isinstance(key.fileobj, socket.socket)
+                    self._receive(key.fileobj)
+            self._expire_idle()

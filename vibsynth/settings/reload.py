@@ -1,0 +1,86 @@
+"""Hot reload: a thread that polls the preset library while the service runs (see docs/presets.md).
+"""
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Callable
+
+from vibsynth.errors import PresetError, VibsynthError
+from vibsynth.settings.library import POLL_READ_BYTES, POLL_READ_FILES, PresetLibrary
+
+log = logging.getLogger(__name__)
+
+
+class PresetWatcher:
+    """Poll a library's folders and reload on change (edits, additions, removals).
+
+    Parameters
+    ----------
+    library : PresetLibrary
+    on_change : callable
+        ``on_change(name)`` for every added, changed or removed preset (called from the
+        watcher thread; exceptions are logged, never stop the watcher). For a removed
+        preset ``library.get(name)`` raises: keep what is playing.
+    interval_s : float
+        Polling period (0.25 s: changes are picked up well within a second).
+
+    Notes
+    -----
+    Everything happens in the watcher's own thread, never in the audio callback. A poll
+    lists the folders and stats the ``*.yaml`` files (at most :data:`MAX_FILES_PER_FOLDER`
+    each); it reads only files whose (mtime, size, inode) changed, at most
+    :data:`POLL_READ_FILES` files and :data:`POLL_READ_BYTES` bytes per poll, and never a
+    file over :data:`MAX_PRESET_BYTES` (logged once). A 50 MB file in the folder costs one
+    ``stat`` per poll.
+    """
+
+    def __init__(self, library: PresetLibrary, on_change: Callable[[str], None], interval_s: float = 0.25) -> None:
+        if not (isinstance(interval_s, (int, float)) and not isinstance(interval_s, bool) and 0 < interval_s <= 10):
+            raise PresetError(f"watch interval {interval_s!r} s is outside the allowed range (0, 10] s")
+        self.library = library
+        self.on_change = on_change
+        self.interval_s = float(interval_s)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def poll(self) -> dict[str, str]:
+        """Check once; read what changed (bounded, see the class notes), notify. Returns the changes."""
+        changes = self.library.reload(read_files=POLL_READ_FILES, read_bytes=POLL_READ_BYTES)
+        for name, kind in changes.items():
+            log.info("preset %r %s", name, kind)
+            try:
+                self.on_change(name)
+            except VibsynthError as exc:  # e.g. a removed preset that was playing: keep what plays
+                log.warning("preset %r %s: %s", name, kind, exc)
+            except Exception:  # noqa: BLE001 - a callback bug must not stop hot reload
+                log.exception("preset %r: on_change callback failed", name)
+        return changes
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.interval_s):
+            try:
+                self.poll()
+            except Exception:  # noqa: BLE001 - keep watching whatever happens
+                log.exception("preset watcher: unexpected error")
+
+    def start(self) -> "PresetWatcher":
+        """Start the polling thread (daemon); returns self."""
+        if self._thread is None or not self._thread.is_alive():
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="vibsynth-preset-watcher", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        """Stop the thread and wait for it."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            self._thread = None
+
+    def __enter__(self) -> "PresetWatcher":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
