@@ -5,6 +5,7 @@
 
 Prints a table and writes JSON. Times are medians over repeats (wall clock, one thread).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -52,8 +53,16 @@ def main() -> int:
                 measured = 10 * np.log10(band_powers(res.signal, fs=fs))
                 diff = measured - target
                 err = float(np.max(np.abs(diff - diff.mean())))
-                rows.append({"method": method, "fs_hz": fs, "seconds": seconds, "time_s": t,
-                             "max_band_error_db": err, "iterations": res.iterations})
+                rows.append(
+                    {
+                        "method": method,
+                        "fs_hz": fs,
+                        "seconds": seconds,
+                        "time_s": t,
+                        "max_band_error_db": err,
+                        "iterations": res.iterations,
+                    }
+                )
     analysis_rows = []
     for fs in (2800.0, 48000.0):
         seconds = 10.0
@@ -61,16 +70,28 @@ def main() -> int:
         t, _ = _median_time(lambda: analyze(x, fs=fs, basis=basis), args.repeats)
         analysis_rows.append({"fs_hz": fs, "seconds": seconds, "time_s": t, "x_real_time": seconds / t})
 
-    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}, median of {args.repeats}")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}, "
+        f"median of {args.repeats}"
+    )
     print(f"{'method':<10} {'rate Hz':>8} {'len s':>6} {'time ms':>9} {'iters':>6} {'max band err dB':>16}")
     for r in rows:
-        print(f"{r['method']:<10} {r['fs_hz']:8.0f} {r['seconds']:6.1f} {1e3 * r['time_s']:9.1f} {r['iterations']:6d} {r['max_band_error_db']:16.2e}")
+        print(
+            f"{r['method']:<10} {r['fs_hz']:8.0f} {r['seconds']:6.1f} {1e3 * r['time_s']:9.1f} "
+            f"{r['iterations']:6d} {r['max_band_error_db']:16.2e}"
+        )
     print(f"\n{'analysis':<10} {'rate Hz':>8} {'len s':>6} {'time ms':>9} {'x real time':>12}")
     for r in analysis_rows:
-        print(f"{'analyze':<10} {r['fs_hz']:8.0f} {r['seconds']:6.1f} {1e3 * r['time_s']:9.1f} {r['x_real_time']:12.0f}")
+        print(
+            f"{'analyze':<10} {r['fs_hz']:8.0f} {r['seconds']:6.1f} {1e3 * r['time_s']:9.1f} {r['x_real_time']:12.0f}"
+        )
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({"synthesis": rows, "analysis": analysis_rows,
-                                     "machine": platform.platform(), "repeats": args.repeats}, indent=2))
+    args.json.write_text(
+        json.dumps(
+            {"synthesis": rows, "analysis": analysis_rows, "machine": platform.platform(), "repeats": args.repeats},
+            indent=2,
+        )
+    )
     print(f"\nJSON: {args.json}")
     return 0
 

@@ -14,6 +14,7 @@ Prints a table and writes benchmarks/results/engine-<timestamp>.json.
 * underflows (JACK): PortAudio stream at 128 frames for 60 s (10 s with --quick) while
   a control thread floods ~10,000 commands/s through the Controller.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -69,8 +70,16 @@ def bench_render(bank, blocks: int) -> list[dict]:
                     times[n] = time.perf_counter() - t
                 pct = 100 * times * FS / frames
                 p50, p99, p999 = np.percentile(pct, [50, 99, 99.9])
-                rows.append({"channels": channels, "frames": frames, "mode": mode,
-                             "p50_pct": p50, "p99_pct": p99, "p999_pct": p999})
+                rows.append(
+                    {
+                        "channels": channels,
+                        "frames": frames,
+                        "mode": mode,
+                        "p50_pct": p50,
+                        "p99_pct": p99,
+                        "p999_pct": p999,
+                    }
+                )
     return rows
 
 
@@ -92,7 +101,7 @@ def jack_parts(bank, seconds: float) -> dict:
         cap.connect(portaudio_output_ports(cap.client)[:1])
         output.start()
         time.sleep(0.3)
-        for trial in range(20):
+        for _trial in range(20):
             engine.submit(SetKnob("intensity", 0.0, glide_s=0.0))
             time.sleep(0.05)
             cap.reset()
@@ -106,8 +115,12 @@ def jack_parts(bank, seconds: float) -> dict:
                 latencies.append(cap.start_frame + int(nz[0]) - t_submit)
         output.stop()
     lat = np.array(latencies) / FS * 1000
-    result["latency_ms"] = {"median": float(np.median(lat)), "max": float(lat.max()), "n": int(lat.size),
-                            "block_ms": 128 / FS * 1000}
+    result["latency_ms"] = {
+        "median": float(np.median(lat)),
+        "max": float(lat.max()),
+        "n": int(lat.size),
+        "block_ms": 128 / FS * 1000,
+    }
     # Underflows under a control flood through the Controller.
     engine = Engine(bank, channels=2, initial_intensity=0.5, max_block=128)
     controller = Controller(engine)
@@ -137,9 +150,13 @@ def jack_parts(bank, seconds: float) -> dict:
     stop.set()
     thread.join()
     elapsed = time.perf_counter() - t0
-    result["flood"] = {"seconds": elapsed, "commands_per_s": sent[0] / elapsed,
-                       "underflows": output.stats.underflows - before, "startup_underflows": before,
-                       "load_peak_pct": 100 * engine.stats.load_peak}
+    result["flood"] = {
+        "seconds": elapsed,
+        "commands_per_s": sent[0] / elapsed,
+        "underflows": output.stats.underflows - before,
+        "startup_underflows": before,
+        "load_peak_pct": 100 * engine.stats.load_peak,
+    }
     output.stop()
     return result
 
@@ -151,27 +168,47 @@ def main() -> int:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as cache:
         bank_result, bank = bench_bank(cache)
-    print(f"bank build: cold {bank_result['cold_s']:.2f} s, cached {bank_result['cached_s']:.2f} s "
-          f"({bank_result['bytes'] / 1e6:.0f} MB)")
+    print(
+        f"bank build: cold {bank_result['cold_s']:.2f} s, cached {bank_result['cached_s']:.2f} s "
+        f"({bank_result['bytes'] / 1e6:.0f} MB)"
+    )
     rows = bench_render(bank, 2000 if args.quick else 20000)
     print(f"{'ch':>3} {'frames':>6} {'mode':>7} {'p50 %':>7} {'p99 %':>7} {'p99.9 %':>8}")
     for r in rows:
-        print(f"{r['channels']:>3} {r['frames']:>6} {r['mode']:>7} {r['p50_pct']:7.2f} {r['p99_pct']:7.2f} {r['p999_pct']:8.2f}")
+        print(
+            f"{r['channels']:>3} {r['frames']:>6} {r['mode']:>7} "
+            f"{r['p50_pct']:7.2f} {r['p99_pct']:7.2f} {r['p999_pct']:8.2f}"
+        )
     jack = {"skipped": "--no-jack"} if args.no_jack else jack_parts(bank, 10.0 if args.quick else 60.0)
     if "skipped" in jack:
         print(f"JACK measurements skipped: {jack['skipped']}")
     else:
         lat = jack["latency_ms"]
-        print(f"control latency: median {lat['median']:.2f} ms, max {lat['max']:.2f} ms "
-              f"(block {lat['block_ms']:.2f} ms, glide 0; n={lat['n']})")
+        print(
+            f"control latency: median {lat['median']:.2f} ms, max {lat['max']:.2f} ms "
+            f"(block {lat['block_ms']:.2f} ms, glide 0; n={lat['n']})"
+        )
         fl = jack["flood"]
-        print(f"flood: {fl['commands_per_s']:.0f} commands/s for {fl['seconds']:.0f} s -> "
-              f"{fl['underflows']} underflows (start-up {fl['startup_underflows']}), peak load {fl['load_peak_pct']:.0f}%")
+        print(
+            f"flood: {fl['commands_per_s']:.0f} commands/s for {fl['seconds']:.0f} s -> "
+            f"{fl['underflows']} underflows (start-up {fl['startup_underflows']}), peak load {fl['load_peak_pct']:.0f}%"
+        )
     out_dir = Path(__file__).resolve().parent / "results"
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"engine-{time.strftime('%Y%m%d-%H%M%S')}.json"
-    path.write_text(json.dumps({"bank": bank_result, "render": rows, "jack": jack, "quick": args.quick,
-                                "cpus": os.cpu_count(), "load": os.getloadavg()}, indent=2))
+    path.write_text(
+        json.dumps(
+            {
+                "bank": bank_result,
+                "render": rows,
+                "jack": jack,
+                "quick": args.quick,
+                "cpus": os.cpu_count(),
+                "load": os.getloadavg(),
+            },
+            indent=2,
+        )
+    )
     print(f"wrote {path}")
     return 0
 

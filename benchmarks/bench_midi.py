@@ -17,6 +17,7 @@ JACK audio port; a second JACK MIDI client in this process sends to ``vibsynth``
 
 Prints a table and writes ``benchmarks/results/midi.json``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -57,8 +58,12 @@ def main() -> int:
 
     client = jack.Client("vibsynth-bench")
     fs, period = client.samplerate, client.blocksize
-    engine = Engine(build_bank(default_basis(), BankSpec(fs=fs, loop_seconds=1.0, levels=15)), channels=1,
-                    ceiling_db=-24.0, max_block=max(period, 256))
+    engine = Engine(
+        build_bank(default_basis(), BankSpec(fs=fs, loop_seconds=1.0, levels=15)),
+        channels=1,
+        ceiling_db=-24.0,
+        max_block=max(period, 256),
+    )
     controller = Controller(engine)
     data = default_config_data()
     data["midi"].update(release_ms=0.0, attack_ms=0.0)

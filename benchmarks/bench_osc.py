@@ -15,6 +15,7 @@ server's packet counter (``/status``) gives received vs sent; underflows are rea
 
 Prints a table and writes JSON to benchmarks/results/osc.json.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -70,10 +71,10 @@ def latency_jack(port: int, trials: int) -> list[float]:
         if first < 64 or first + int(gap_s * rate) > cap_frames:
             rejected["outside capture"] += 1
             continue
-        if np.any(np.abs(data[first - 64:first]) > 1e-7):
+        if np.any(np.abs(data[first - 64 : first]) > 1e-7):
             rejected["not silent before"] += 1
             continue
-        nonzero = np.flatnonzero(np.abs(data[first:first + int(gap_s * rate)]) > 1e-7)
+        nonzero = np.flatnonzero(np.abs(data[first : first + int(gap_s * rate)]) > 1e-7)
         if not nonzero.size:
             rejected["no onset"] += 1
             continue
@@ -98,8 +99,10 @@ def latency_sync(port: int, trials: int) -> list[float]:
 
 def rate_test(port: int, rate: int, seconds: float) -> dict:
     client = Client(port)
-    messages = [encode_message(f"/vibsynth/ch/1/{'intensity' if k % 2 else 'balance'}", ((k % 100) / 100.0,), "f")
-                for k in range(200)]
+    messages = [
+        encode_message(f"/vibsynth/ch/1/{'intensity' if k % 2 else 'balance'}", ((k % 100) / 100.0,), "f")
+        for k in range(200)
+    ]
     before = client.status()
     per_ms = max(1, rate // 1000)
     sent = 0
@@ -118,9 +121,15 @@ def rate_test(port: int, rate: int, seconds: float) -> dict:
     after = client.status()
     client.close()
     received = int(after["packets"] - before["packets"] - 2)
-    return {"rate_target": rate, "sent": sent, "rate_sent": sent / elapsed, "received": received,
-            "lost": sent - received, "underflows": int(after["underflows"] - before["underflows"]),
-            "render_load": float(after["load"])}
+    return {
+        "rate_target": rate,
+        "sent": sent,
+        "rate_sent": sent / elapsed,
+        "received": received,
+        "lost": sent - received,
+        "underflows": int(after["underflows"] - before["underflows"]),
+        "render_load": float(after["load"]),
+    }
 
 
 def main() -> int:
@@ -145,20 +154,29 @@ def main() -> int:
 
     lossless = [r["rate_sent"] for r in rates if r["lost"] == 0]
     result = {
-        "latency": {"mode": mode, "trials": len(lat), "median_ms": 1e3 * statistics.median(lat) if lat else None,
-                    "p99_ms": 1e3 * _percentile(lat, 99), "max_ms": 1e3 * max(lat) if lat else None},
+        "latency": {
+            "mode": mode,
+            "trials": len(lat),
+            "median_ms": 1e3 * statistics.median(lat) if lat else None,
+            "p99_ms": 1e3 * _percentile(lat, 99),
+            "max_ms": 1e3 * max(lat) if lat else None,
+        },
         "rates": rates,
         "max_lossless_rate": max(lossless) if lossless else 0.0,
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()},
         "when": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
     latency = result["latency"]
-    print(f"latency ({mode}, {latency['trials']} trials): median {latency['median_ms']:.2f} ms, "
-          f"p99 {latency['p99_ms']:.2f} ms, max {latency['max_ms']:.2f} ms")
+    print(
+        f"latency ({mode}, {latency['trials']} trials): median {latency['median_ms']:.2f} ms, "
+        f"p99 {latency['p99_ms']:.2f} ms, max {latency['max_ms']:.2f} ms"
+    )
     print(f"{'target/s':>9} {'sent/s':>9} {'sent':>8} {'received':>9} {'lost':>6} {'underflows':>10} {'load':>6}")
     for r in rates:
-        print(f"{r['rate_target']:>9} {r['rate_sent']:>9.0f} {r['sent']:>8} {r['received']:>9} {r['lost']:>6} "
-              f"{r['underflows']:>10} {r['render_load']:>6.2f}")
+        print(
+            f"{r['rate_target']:>9} {r['rate_sent']:>9.0f} {r['sent']:>8} {r['received']:>9} {r['lost']:>6} "
+            f"{r['underflows']:>10} {r['render_load']:>6.2f}"
+        )
     print(f"max sustained rate without loss: {result['max_lossless_rate']:.0f} msg/s")
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(result, indent=2), encoding="utf-8")

@@ -78,6 +78,7 @@ The run is bounded (``--timeout``, default from the phase lengths) and every pro
 on SIGTERM and on the timeout; the children also get SIGTERM from the kernel if this script
 dies (``setpriv --pdeathsig``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -108,8 +109,8 @@ PEERS = ("scsynth", "pyo", "vibsynth")
 # ------------------------------------------------------------------ the texture (30 bands)
 N_BANDS = 30
 CENTRES = [10.0 * 100.0 ** (k / (N_BANDS - 1)) for k in range(N_BANDS)]
-_R = 100.0 ** (1.0 / (N_BANDS - 1))                   # ratio between adjacent centres
-RQ = math.sqrt(_R) - 1.0 / math.sqrt(_R)              # (upper - lower midpoint) / centre = 0.159
+_R = 100.0 ** (1.0 / (N_BANDS - 1))  # ratio between adjacent centres
+RQ = math.sqrt(_R) - 1.0 / math.sqrt(_R)  # (upper - lower midpoint) / centre = 0.159
 SILENT_THRESHOLD = 1e-7
 LAT_GAP_S = 0.1
 SC_NODE = 1000
@@ -178,18 +179,24 @@ def osc_decode(packet: bytes) -> tuple[str, list]:
     args: list = []
     for t in tags[1:]:
         if t == "i":
-            args.append(struct.unpack_from(">i", packet, pos)[0]); pos += 4
+            args.append(struct.unpack_from(">i", packet, pos)[0])
+            pos += 4
         elif t == "f":
-            args.append(struct.unpack_from(">f", packet, pos)[0]); pos += 4
+            args.append(struct.unpack_from(">f", packet, pos)[0])
+            pos += 4
         elif t == "h":
-            args.append(struct.unpack_from(">q", packet, pos)[0]); pos += 8
+            args.append(struct.unpack_from(">q", packet, pos)[0])
+            pos += 8
         elif t == "d":
-            args.append(struct.unpack_from(">d", packet, pos)[0]); pos += 8
+            args.append(struct.unpack_from(">d", packet, pos)[0])
+            pos += 8
         elif t in "sS":
-            s, pos = read_str(pos); args.append(s)
+            s, pos = read_str(pos)
+            args.append(s)
         elif t == "b":
             n = struct.unpack_from(">i", packet, pos)[0]
-            args.append(packet[pos + 4:pos + 4 + n]); pos += 4 + n + (-n % 4)
+            args.append(packet[pos + 4 : pos + 4 + n])
+            pos += 4 + n + (-n % 4)
         elif t in "TF":
             args.append(t == "T")
         elif t == "N":
@@ -221,7 +228,7 @@ class OscClient:
             self.sock.settimeout(left)
             try:
                 data = self.sock.recv(65536)
-            except socket.timeout:
+            except TimeoutError:
                 raise TimeoutError(f"no {expect} reply") from None
             except ConnectionRefusedError:
                 time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
@@ -326,8 +333,9 @@ def spawn(cmd: list[str], *, env: dict, log: Path, stdout=None, cwd: Path = ROOT
     if shutil.which("setpriv"):
         cmd = ["setpriv", "--pdeathsig", "TERM", "--", *cmd]
     fh = open(log, "ab")
-    proc = subprocess.Popen(cmd, env=env, stdout=stdout or fh, stderr=fh, stdin=subprocess.DEVNULL,
-                            start_new_session=True, cwd=cwd)
+    proc = subprocess.Popen(
+        cmd, env=env, stdout=stdout or fh, stderr=fh, stdin=subprocess.DEVNULL, start_new_session=True, cwd=cwd
+    )
     fh.close()
     _CHILDREN.append(proc)
     return proc
@@ -378,19 +386,32 @@ class JackServer:
 
     def start(self) -> None:
         for realtime in (True, False):
-            cmd = ["jackd", "-n", self.name] + (["-R"] if realtime else []) + \
-                  ["-d", "dummy", "-r", str(self.rate), "-p", str(self.period)]
+            cmd = (
+                ["jackd", "-n", self.name]
+                + (["-R"] if realtime else [])
+                + ["-d", "dummy", "-r", str(self.rate), "-p", str(self.period)]
+            )
             self.proc = spawn(cmd, env=self.env, log=self.log)
-            ok = subprocess.run(["jack_wait", "-w", "-t", "10"], env=self.env, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, timeout=20).returncode == 0
+            ok = (
+                subprocess.run(
+                    ["jack_wait", "-w", "-t", "10"],
+                    env=self.env,
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    timeout=20,
+                ).returncode
+                == 0
+            )
             if ok and self.proc.poll() is None:
                 self.realtime = realtime
                 return
             stop(self.proc)
             if "Too many servers" in self.log_text():
-                raise RuntimeError("jackd: 'Too many servers already active': JACK's registry "
-                                   "(/dev/shm/jack-shm-registry, 8 slots) is full; a slot of a dead server is "
-                                   "reclaimed by starting and stopping (SIGTERM) a jackd of the same name")
+                raise RuntimeError(
+                    "jackd: 'Too many servers already active': JACK's registry "
+                    "(/dev/shm/jack-shm-registry, 8 slots) is full; a slot of a dead server is "
+                    "reclaimed by starting and stopping (SIGTERM) a jackd of the same name"
+                )
         raise RuntimeError(f"jackd did not start; log:\n{self.log.read_text(errors='replace')}")
 
     def log_text(self) -> str:
@@ -488,9 +509,9 @@ class Capture:
         begin = now - int(self.client.frames_since_cycle_start * 1e9 / self.rate)
         if pos == 0:
             self.start_frame = first
-        self.data[pos:pos + n] = self.port.get_array()[:n]
-        self.frame_of[pos:pos + n] = first + self._ramp[:n]
-        self.ns_of[pos:pos + n] = begin + self._ramp[:n] * 1_000_000_000 // self.rate
+        self.data[pos : pos + n] = self.port.get_array()[:n]
+        self.frame_of[pos : pos + n] = first + self._ramp[:n]
+        self.ns_of[pos : pos + n] = begin + self._ramp[:n] * 1_000_000_000 // self.rate
         self.frames = pos + n
 
     def frame_now(self) -> int:
@@ -502,7 +523,7 @@ class Capture:
         finally:
             self.client.close()
 
-    def __enter__(self) -> "Capture":
+    def __enter__(self) -> Capture:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -550,7 +571,9 @@ class Target:
                 return
             except (TimeoutError, OSError):
                 if time.monotonic() > deadline:
-                    raise RuntimeError(f"{self.name} not ready after {timeout:.0f} s; log:\n{self.log_tail()}")
+                    raise RuntimeError(
+                        f"{self.name} not ready after {timeout:.0f} s; log:\n{self.log_tail()}"
+                    ) from None
 
     def log_tail(self, n: int = 30) -> str:
         try:
@@ -565,10 +588,31 @@ class ScsynthTarget(Target):
     def start(self) -> None:
         env = dict(self.jackd.env, SC_JACK_DEFAULT_OUTPUTS="", SC_JACK_DEFAULT_INPUTS="")
         self.client_name = "scsynth-peer"
-        cmd = ["scsynth", "-u", str(self.port), "-i", "0", "-o", "1", "-H", f"{self.jackd.name}:{self.client_name}",
-               "-z", "64", "-R", "0", "-l", "1", "-D", "0"]
-        self.settings = {"command": " ".join(cmd), "control_block": 64, "filter": "BPF (rq %.4f)" % RQ,
-                         "synthdef": "WhiteNoise -> 30 x BPF * g_k (MulAdd chain) * amp -> Out (built in Python, v2)"}
+        cmd = [
+            "scsynth",
+            "-u",
+            str(self.port),
+            "-i",
+            "0",
+            "-o",
+            "1",
+            "-H",
+            f"{self.jackd.name}:{self.client_name}",
+            "-z",
+            "64",
+            "-R",
+            "0",
+            "-l",
+            "1",
+            "-D",
+            "0",
+        ]
+        self.settings = {
+            "command": " ".join(cmd),
+            "control_block": 64,
+            "filter": f"BPF (rq {RQ:.4f})",
+            "synthdef": "WhiteNoise -> 30 x BPF * g_k (MulAdd chain) * amp -> Out (built in Python, v2)",
+        }
         self.proc = spawn(cmd, env=env, log=self.log)
         self.osc = OscClient(self.port)
         self._wait_ready(lambda: self.osc.request(osc_message("/status"), "/status.reply", 0.3), 30)
@@ -591,8 +635,10 @@ class ScsynthTarget(Target):
         self.osc.send(osc_message("/n_set", SC_NODE, "amp", 1.0 if loud else 0.0))
 
     def flood_messages(self) -> list[bytes]:
-        return [osc_message("/n_set", SC_NODE, f"g{n % N_BANDS}", self.gains[n % N_BANDS] * (0.5 if n % 2 else 1.0))
-                for n in range(2 * N_BANDS)]
+        return [
+            osc_message("/n_set", SC_NODE, f"g{n % N_BANDS}", self.gains[n % N_BANDS] * (0.5 if n % 2 else 1.0))
+            for n in range(2 * N_BANDS)
+        ]
 
 
 class PyoTarget(Target):
@@ -600,11 +646,24 @@ class PyoTarget(Target):
 
     def start(self) -> None:
         self.client_name = "pyo-peer"
-        cmd = [sys.executable, str(Path(__file__).resolve()), "_pyo_child", "--port", str(self.port),
-               "--jackname", self.client_name, "--rate", str(self.jackd.rate), "--period", str(self.jackd.period)]
-        self.settings = {"server": f"Server(sr={self.jackd.rate}, nchnls=1, buffersize={self.jackd.period}, "
-                                   f"duplex=0, audio='jack')", "filter": "ButBP (q %.3f)" % (1 / RQ),
-                         "osc": "OscReceive (interpolation off), polled in pyo's audio callback"}
+        cmd = [
+            sys.executable,
+            str(Path(__file__).resolve()),
+            "_pyo_child",
+            "--port",
+            str(self.port),
+            "--jackname",
+            self.client_name,
+            "--rate",
+            str(self.jackd.rate),
+            "--period",
+            str(self.jackd.period),
+        ]
+        self.settings = {
+            "server": f"Server(sr={self.jackd.rate}, nchnls=1, buffersize={self.jackd.period}, duplex=0, audio='jack')",
+            "filter": "ButBP (q %.3f)" % (1 / RQ),
+            "osc": "OscReceive (interpolation off), polled in pyo's audio callback",
+        }
         self.proc = spawn(cmd, env=self.jackd.env, log=self.log)
         deadline = time.monotonic() + 60
         while "PEER-READY" not in self.log.read_text(errors="replace"):
@@ -622,8 +681,10 @@ class PyoTarget(Target):
         self.osc.send(osc_message(PYO_AMP, 1.0 if loud else 0.0))
 
     def flood_messages(self) -> list[bytes]:
-        return [osc_message(PYO_GAIN.format(n % N_BANDS), self.gains[n % N_BANDS] * (0.5 if n % 2 else 1.0))
-                for n in range(2 * N_BANDS)]
+        return [
+            osc_message(PYO_GAIN.format(n % N_BANDS), self.gains[n % N_BANDS] * (0.5 if n % 2 else 1.0))
+            for n in range(2 * N_BANDS)
+        ]
 
 
 class VibsynthTarget(Target):
@@ -640,12 +701,26 @@ class VibsynthTarget(Target):
             "version: 1\n"
             f"audio:\n  host_api: JACK\n  rate: {self.jackd.rate}\n  block_size: {self.jackd.period}\n  channels: 1\n"
             f"osc:\n  port: {self.port}\n"
-            "knobs:\n  glide_ms: 0\n", encoding="utf-8")
-        cmd = base + ["serve", "--config", str(config), "--output", "sounddevice", "--no-midi",
-                      "--osc-port", str(self.port)]
+            "knobs:\n  glide_ms: 0\n",
+            encoding="utf-8",
+        )
+        cmd = base + [
+            "serve",
+            "--config",
+            str(config),
+            "--output",
+            "sounddevice",
+            "--no-midi",
+            "--osc-port",
+            str(self.port),
+        ]
         env = dict(self.jackd.env, VIBSYNTH_HOST_API="JACK", PYTHONPATH=str(src))
-        self.settings = {"command": " ".join(["vibsynth"] + cmd[len(base):]), "config": config.read_text(),
-                         "flood": f"/vibsynth/{self.args.vibsynth_flood}", "source": self.args.vibsynth_source}
+        self.settings = {
+            "command": " ".join(["vibsynth"] + cmd[len(base) :]),
+            "config": config.read_text(),
+            "flood": f"/vibsynth/{self.args.vibsynth_flood}",
+            "source": self.args.vibsynth_source,
+        }
         self.proc = spawn(cmd, env=env, log=self.log, cwd=src)
         self.osc = OscClient(self.port)
         self._wait_ready(lambda: self.osc.request(osc_message("/vibsynth/ping", 1), "/vibsynth/pong", 0.3), 180)
@@ -685,20 +760,31 @@ TARGETS = {"scsynth": ScsynthTarget, "pyo": PyoTarget, "vibsynth": VibsynthTarge
 
 def vibsynth_snapshot(rev: str, tmp: Path) -> tuple[Path, str]:
     """``git archive rev`` into tmp, with the C core built in place: (folder, description)."""
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--verify", f"{rev}^{{commit}}"],
-                            capture_output=True, text=True, timeout=30, check=True).stdout.strip()
+    commit = subprocess.run(
+        ["git", "-C", str(ROOT), "rev-parse", "--verify", f"{rev}^{{commit}}"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=True,
+    ).stdout.strip()
     dest = tmp / f"vibsynth-{commit[:10]}"
     dest.mkdir()
     archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit], capture_output=True, timeout=120, check=True)
     subprocess.run(["tar", "-x", "-C", str(dest)], input=archive.stdout, timeout=120, check=True)
     log = tmp / "vibsynth-build.log"
     with open(log, "wb") as fh:
-        r = subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--inplace"], cwd=dest, stdout=fh,
-                           stderr=subprocess.STDOUT, timeout=600)
+        r = subprocess.run(
+            [sys.executable, "setup.py", "-q", "build_ext", "--inplace"],
+            cwd=dest,
+            stdout=fh,
+            stderr=subprocess.STDOUT,
+            timeout=600,
+        )
     if r.returncode != 0:
         raise RuntimeError(f"building vibsynth at {commit[:10]} failed:\n{log.read_text(errors='replace')[-2000:]}")
-    subject = subprocess.run(["git", "-C", str(ROOT), "log", "-1", "--format=%h %s", commit], capture_output=True,
-                             text=True, timeout=30).stdout.strip()
+    subject = subprocess.run(
+        ["git", "-C", str(ROOT), "log", "-1", "--format=%h %s", commit], capture_output=True, text=True, timeout=30
+    ).stdout.strip()
     return dest, f"git {rev} = {subject[:90]}"
 
 
@@ -754,19 +840,26 @@ class Snapshot:
 def jackd_events(text: str, client: str) -> dict:
     lines = text.splitlines()
     target = sum(1 for ln in lines if f"client = {client} was not finished" in ln)
-    return {"target_late_cycles": target,
-            "other_clients_late": sum(1 for ln in lines if "was not finished" in ln) - target,
-            "driver_late_wakeups": sum(1 for ln in lines if "JackTimedDriver::Process XRun" in ln),
-            "process_errors": sum(1 for ln in lines if "Process error" in ln)}
+    return {
+        "target_late_cycles": target,
+        "other_clients_late": sum(1 for ln in lines if "was not finished" in ln) - target,
+        "driver_late_wakeups": sum(1 for ln in lines if "JackTimedDriver::Process XRun" in ln),
+        "process_errors": sum(1 for ln in lines if "Process error" in ln),
+    }
 
 
 def window(a: Snapshot, b: Snapshot, jackd: JackServer, client: str) -> dict:
     dt = b.t - a.t
     busy = (b.sys[0] - a.sys[0]) / max(1, b.sys[1] - a.sys[1])
-    out = {"seconds": dt, "cpu_pct": _pct(a.cpu, b.cpu, dt), "jackd_cpu_pct": _pct(a.jackd_cpu, b.jackd_cpu, dt),
-           "sender_cpu_pct": _pct(a.sender_cpu, b.sender_cpu, dt),
-           "machine_busy_pct_of_all_cores": 100.0 * busy, "xrun_callbacks": b.xruns - a.xruns}
-    out.update(jackd_events(jackd.log_text()[a.log_len:b.log_len], client))
+    out = {
+        "seconds": dt,
+        "cpu_pct": _pct(a.cpu, b.cpu, dt),
+        "jackd_cpu_pct": _pct(a.jackd_cpu, b.jackd_cpu, dt),
+        "sender_cpu_pct": _pct(a.sender_cpu, b.sender_cpu, dt),
+        "machine_busy_pct_of_all_cores": 100.0 * busy,
+        "xrun_callbacks": b.xruns - a.xruns,
+    }
+    out.update(jackd_events(jackd.log_text()[a.log_len : b.log_len], client))
     if a.underflows is not None and b.underflows is not None:
         out["status_underflows"] = int(b.underflows - a.underflows)
     if a.packets is not None and b.packets is not None:
@@ -776,8 +869,13 @@ def window(a: Snapshot, b: Snapshot, jackd: JackServer, client: str) -> dict:
 
 def baseline(jackd: JackServer, mon: Monitor, seconds: float) -> dict:
     """The JACK server with no target: how often the dummy driver itself wakes late here."""
-    t0, cpu0, sys0, x0, n0 = time.monotonic(), proc_cpu_seconds(jackd.proc.pid), system_cpu(), mon.xruns, \
-        len(jackd.log_text())
+    t0, cpu0, sys0, x0, n0 = (
+        time.monotonic(),
+        proc_cpu_seconds(jackd.proc.pid),
+        system_cpu(),
+        mon.xruns,
+        len(jackd.log_text()),
+    )
     loads = []
     end = t0 + seconds
     while time.monotonic() < end:
@@ -785,9 +883,13 @@ def baseline(jackd: JackServer, mon: Monitor, seconds: float) -> dict:
         loads.append(mon.cpu_load())
     dt = time.monotonic() - t0
     sys1 = system_cpu()
-    out = {"seconds": dt, "jackd_cpu_pct": _pct(cpu0, proc_cpu_seconds(jackd.proc.pid), dt),
-           "machine_busy_pct_of_all_cores": 100.0 * (sys1[0] - sys0[0]) / max(1, sys1[1] - sys0[1]),
-           "xrun_callbacks": mon.xruns - x0, "dsp_load_mean_pct": float(np.mean(loads)) if loads else None}
+    out = {
+        "seconds": dt,
+        "jackd_cpu_pct": _pct(cpu0, proc_cpu_seconds(jackd.proc.pid), dt),
+        "machine_busy_pct_of_all_cores": 100.0 * (sys1[0] - sys0[0]) / max(1, sys1[1] - sys0[1]),
+        "xrun_callbacks": mon.xruns - x0,
+        "dsp_load_mean_pct": float(np.mean(loads)) if loads else None,
+    }
     out.update(jackd_events(jackd.log_text()[n0:], "(none)"))
     return out
 
@@ -818,9 +920,12 @@ def latency_trials(target: Target, server: str, source: str, trials: int) -> dic
         time.sleep(0.02)
         rate, frames, period = cap.rate, cap.frames, int(cap.client.blocksize)
         data, frame_of, ns_of = cap.data[:frames], cap.frame_of[:frames], cap.ns_of[:frames]
-    out: dict = {"frame": [], "wall": [],
-                 "rejected": {"outside capture": 0, "not silent before": 0, "no onset": 0},
-                 "capture_gaps": int(np.count_nonzero(np.diff(frame_of) != 1)) if frames > 1 else 0}
+    out: dict = {
+        "frame": [],
+        "wall": [],
+        "rejected": {"outside capture": 0, "not silent before": 0, "no onset": 0},
+        "capture_gaps": int(np.count_nonzero(np.diff(frame_of) != 1)) if frames > 1 else 0,
+    }
     span = int(LAT_GAP_S * rate)
     # A target cycle that runs late (VM jitter) still takes messages sent after its nominal
     # start, so the onset can come before the send on either clock by up to about a period:
@@ -828,17 +933,17 @@ def latency_trials(target: Target, server: str, source: str, trials: int) -> dic
     # earlier) and keep such zero or negative latencies as measured.
     lead_ns = 2 * period * 1_000_000_000 // rate
     for sent_frame, sent_ns in sends:
-        after = ns_of >= sent_ns                 # (not always monotonic: cycles catch up after a late one)
+        after = ns_of >= sent_ns  # (not always monotonic: cycles catch up after a late one)
         first = int(np.argmax(after)) if after.any() else frames
         before = ns_of >= sent_ns - lead_ns
         start = int(np.argmax(before)) if before.any() else frames
         if start < 64 or first + span > frames:
             out["rejected"]["outside capture"] += 1
             continue
-        if np.any(np.abs(data[start - 64:start]) > SILENT_THRESHOLD):
+        if np.any(np.abs(data[start - 64 : start]) > SILENT_THRESHOLD):
             out["rejected"]["not silent before"] += 1
             continue
-        onset = np.flatnonzero(np.abs(data[start:first + span]) > SILENT_THRESHOLD)
+        onset = np.flatnonzero(np.abs(data[start : first + span]) > SILENT_THRESHOLD)
         if not onset.size:
             out["rejected"]["no onset"] += 1
             continue
@@ -851,9 +956,14 @@ def latency_trials(target: Target, server: str, source: str, trials: int) -> dic
 def _lat_summary(values: list[float]) -> dict:
     if not values:
         return {"median_ms": None, "p95_ms": None, "min_ms": None, "max_ms": None, "not_positive": 0, "all_ms": []}
-    return {"median_ms": 1e3 * statistics.median(values), "p95_ms": 1e3 * float(np.percentile(values, 95)),
-            "min_ms": 1e3 * min(values), "max_ms": 1e3 * max(values),
-            "not_positive": sum(1 for x in values if x <= 0), "all_ms": [round(1e3 * x, 3) for x in values]}
+    return {
+        "median_ms": 1e3 * statistics.median(values),
+        "p95_ms": 1e3 * float(np.percentile(values, 95)),
+        "min_ms": 1e3 * min(values),
+        "max_ms": 1e3 * max(values),
+        "not_positive": sum(1 for x in values if x <= 0),
+        "all_ms": [round(1e3 * x, 3) for x in values],
+    }
 
 
 def level_check(target: Target, server: str, source: str) -> dict:
@@ -864,26 +974,40 @@ def level_check(target: Target, server: str, source: str) -> dict:
         cap.armed = True
         time.sleep(0.4)
         cap.armed = False
-        loud = cap.data[:cap.frames].copy()
+        loud = cap.data[: cap.frames].copy()
         target.set_loud(False)
         time.sleep(0.2)
         cap.frames, cap.start_frame = 0, None
         cap.armed = True
         time.sleep(0.4)
         cap.armed = False
-        quiet = cap.data[:cap.frames].copy()
+        quiet = cap.data[: cap.frames].copy()
     target.set_loud(True)
     rms = float(np.sqrt(np.mean(loud.astype(np.float64) ** 2))) if loud.size else 0.0
-    return {"loud_rms": rms, "loud_dbfs": 20 * math.log10(rms) if rms > 0 else None,
-            "silent_max_abs": float(np.max(np.abs(quiet))) if quiet.size else None}
+    return {
+        "loud_rms": rms,
+        "loud_dbfs": 20 * math.log10(rms) if rms > 0 else None,
+        "silent_max_abs": float(np.max(np.abs(quiet))) if quiet.size else None,
+    }
 
 
 def start_sender(target: Target, rate: int, max_seconds: float, tmp: Path) -> subprocess.Popen:
     msgs = target.flood_messages()
     path = tmp / f"flood-{target.name}.bin"
     path.write_bytes(b"".join(struct.pack(">I", len(m)) + m for m in msgs))
-    cmd = [sys.executable, str(Path(__file__).resolve()), "_flood", "--port", str(target.port), "--rate", str(rate),
-           "--max-seconds", str(max_seconds), "--messages", str(path)]
+    cmd = [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "_flood",
+        "--port",
+        str(target.port),
+        "--rate",
+        str(rate),
+        "--max-seconds",
+        str(max_seconds),
+        "--messages",
+        str(path),
+    ]
     return spawn(cmd, env=dict(os.environ), log=tmp / f"flood-{target.name}.log", stdout=subprocess.PIPE)
 
 
@@ -932,10 +1056,14 @@ def run_phase(phase: str, target: Target, jackd: JackServer, mon: Monitor, sourc
     c = Snapshot(target, jackd, mon, sender)
     result["latency_window"] = window(b, c, jackd, target.client_name)
     result["phase_total"] = window(a, c, jackd, target.client_name)
-    result["latency"] = {"trials": len(lat["frame"]), "clock": args.latency_clock,
-                         **_lat_summary(lat[args.latency_clock]),
-                         "frame_clock": _lat_summary(lat["frame"]), "wall_clock": _lat_summary(lat["wall"]),
-                         **{k: v for k, v in lat.items() if k not in ("frame", "wall")}}
+    result["latency"] = {
+        "trials": len(lat["frame"]),
+        "clock": args.latency_clock,
+        **_lat_summary(lat[args.latency_clock]),
+        "frame_clock": _lat_summary(lat["frame"]),
+        "wall_clock": _lat_summary(lat["wall"]),
+        **{k: v for k, v in lat.items() if k not in ("frame", "wall")},
+    }
     if sender is not None:
         result["sender"] = stop_sender(sender)
     target.set_loud(True)
@@ -949,10 +1077,15 @@ def run_peer(peer: str, args, tmp: Path, gains: list[float]) -> dict:
     mon = None
     try:
         jackd.start()
-        entry["jack"] = {"server": jackd.name, "driver": "dummy", "rate": jackd.rate, "period": jackd.period,
-                         "realtime": jackd.realtime,
-                         "command": f"jackd -n {jackd.name} {'-R ' if jackd.realtime else ''}-d dummy -r {jackd.rate} "
-                                    f"-p {jackd.period}"}
+        entry["jack"] = {
+            "server": jackd.name,
+            "driver": "dummy",
+            "rate": jackd.rate,
+            "period": jackd.period,
+            "realtime": jackd.realtime,
+            "command": f"jackd -n {jackd.name} {'-R ' if jackd.realtime else ''}-d dummy -r {jackd.rate} "
+            f"-p {jackd.period}",
+        }
         mon = Monitor(jackd.name)
         if args.baseline > 0:
             print(f"  {peer}: baseline ({args.baseline:g} s of the JACK server alone)", flush=True)
@@ -968,8 +1101,13 @@ def run_peer(peer: str, args, tmp: Path, gains: list[float]) -> dict:
         if source is None:
             raise RuntimeError(f"{peer} registered no JACK output port; log:\n{target.log_tail()}")
         target.client_name = source.split(":", 1)[0]
-        entry.update(version=target.version, settings=target.settings, jack_port=source,
-                     connections=mon.ensure_playback(source), flood_rate=args.rate)
+        entry.update(
+            version=target.version,
+            settings=target.settings,
+            jack_port=source,
+            connections=mon.ensure_playback(source),
+            flood_rate=args.rate,
+        )
         time.sleep(args.warmup)
         entry["level_check"] = level_check(target, jackd.name, source)
         if entry["level_check"]["loud_rms"] <= 0:
@@ -1001,10 +1139,15 @@ def run_peer(peer: str, args, tmp: Path, gains: list[float]) -> dict:
 # ------------------------------------------------------------------ machine info, table
 def _git_describe() -> str:
     try:
-        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--", "vibsynth", "setup.py"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
+        head = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(ROOT), "status", "--porcelain", "--", "vibsynth", "setup.py"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
         return f" (git {head}{', uncommitted changes in vibsynth/' if dirty else ''})"
     except Exception:
         return ""
@@ -1027,8 +1170,12 @@ def machine_info() -> dict:
         except Exception:
             return ""
 
-    versions = {"python": platform.python_version(), "numpy": np.__version__,
-                "jackd": first_line(["jackd", "--version"]), "scsynth": first_line(["scsynth", "-v"])}
+    versions = {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "jackd": first_line(["jackd", "--version"]),
+        "scsynth": first_line(["scsynth", "-v"]),
+    }
     try:
         import jack
 
@@ -1052,9 +1199,16 @@ def machine_info() -> dict:
         mem = Path("/proc/meminfo").read_text().splitlines()[0].split(":", 1)[1].strip()
     except OSError:
         pass
-    return {"cpu_model": model, "cores": os.cpu_count(), "affinity": len(os.sched_getaffinity(0)),
-            "kernel": platform.release(), "platform": platform.platform(), "memory": mem,
-            "loadavg_at_start": os.getloadavg(), "versions": versions}
+    return {
+        "cpu_model": model,
+        "cores": os.cpu_count(),
+        "affinity": len(os.sched_getaffinity(0)),
+        "kernel": platform.release(),
+        "platform": platform.platform(),
+        "memory": mem,
+        "loadavg_at_start": os.getloadavg(),
+        "versions": versions,
+    }
 
 
 def _fmt(v, spec: str = ".1f") -> str:
@@ -1062,8 +1216,10 @@ def _fmt(v, spec: str = ".1f") -> str:
 
 
 def print_table(peers: dict) -> None:
-    head = (f"{'peer':<9} {'phase':<8} {'CPU %':>6} {'DSP %':>6} {'xruns':>5} {'underfl':>7} {'drv late':>8} "
-            f"{'lat med':>7} {'lat p95':>7} {'n':>3}  {'sent/s':>7}")
+    head = (
+        f"{'peer':<9} {'phase':<8} {'CPU %':>6} {'DSP %':>6} {'xruns':>5} {'underfl':>7} {'drv late':>8} "
+        f"{'lat med':>7} {'lat p95':>7} {'n':>3}  {'sent/s':>7}"
+    )
     print(head)
     print("-" * len(head))
     for peer, entry in peers.items():
@@ -1072,23 +1228,29 @@ def print_table(peers: dict) -> None:
             continue
         base = entry.get("baseline")
         if base:
-            print(f"{peer:<9} {'(jack)':<8} {'-':>6} {_fmt(base['dsp_load_mean_pct']):>6} {'-':>5} {'-':>7} "
-                  f"{base['driver_late_wakeups']:>8}")
+            print(
+                f"{peer:<9} {'(jack)':<8} {'-':>6} {_fmt(base['dsp_load_mean_pct']):>6} {'-':>5} {'-':>7} "
+                f"{base['driver_late_wakeups']:>8}"
+            )
         for phase, r in entry.get("phases", {}).items():
             w, tot, lat = r["window"], r["phase_total"], r["latency"]
             sent = r.get("sender", {}).get("rate")
-            print(f"{peer:<9} {phase:<8} {_fmt(w['cpu_pct']):>6} {_fmt(w['dsp_load_mean_pct']):>6} "
-                  f"{tot['target_late_cycles']:>5} {_fmt(w.get('status_underflows'), 'd'):>7} "
-                  f"{tot['driver_late_wakeups']:>8} {_fmt(lat['median_ms'], '.2f'):>7} {_fmt(lat['p95_ms'], '.2f'):>7} "
-                  f"{lat['trials']:>3}  {_fmt(sent, '.0f'):>7}")
+            print(
+                f"{peer:<9} {phase:<8} {_fmt(w['cpu_pct']):>6} {_fmt(w['dsp_load_mean_pct']):>6} "
+                f"{tot['target_late_cycles']:>5} {_fmt(w.get('status_underflows'), 'd'):>7} "
+                f"{tot['driver_late_wakeups']:>8} {_fmt(lat['median_ms'], '.2f'):>7} {_fmt(lat['p95_ms'], '.2f'):>7} "
+                f"{lat['trials']:>3}  {_fmt(sent, '.0f'):>7}"
+            )
         if "error" in entry:
             print(f"{peer:<9} FAILED: {entry['error'].splitlines()[0]}")
-    print("CPU % = target process (all threads), % of one core, over the window; DSP % = JACK's load (mean); "
-          "xruns = cycles jackd reports the target's client late (window + latency trials); underfl = vibsynth "
-          "/status underflows in the window (PortAudio counts every xrun of the server, so during the trials it "
-          "also counts the capture client's); drv late = the dummy driver's own late wake-ups (window + trials; "
-          "(jack) = the server alone before the target starts); latency ms, OSC send -> first output sample "
-          "(n trials).")
+    print(
+        "CPU % = target process (all threads), % of one core, over the window; DSP % = JACK's load (mean); "
+        "xruns = cycles jackd reports the target's client late (window + latency trials); underfl = vibsynth "
+        "/status underflows in the window (PortAudio counts every xrun of the server, so during the trials it "
+        "also counts the capture client's); drv late = the dummy driver's own late wake-ups (window + trials; "
+        "(jack) = the server alone before the target starts); latency ms, OSC send -> first output sample "
+        "(n trials)."
+    )
 
 
 # ------------------------------------------------------------------ child entry points
@@ -1139,7 +1301,7 @@ def flood_child(argv: list[str]) -> int:
     msgs, pos = [], 0
     while pos < len(raw):
         n = struct.unpack_from(">I", raw, pos)[0]
-        msgs.append(raw[pos + 4:pos + 4 + n])
+        msgs.append(raw[pos + 4 : pos + 4 + n])
         pos += 4 + n
     stop_flag = []
     signal.signal(signal.SIGTERM, lambda *_: stop_flag.append(1))
@@ -1162,8 +1324,12 @@ def flood_child(argv: list[str]) -> int:
         if delay > 0:
             time.sleep(delay)
     elapsed = time.perf_counter() - start
-    print(json.dumps({"sent": sent, "seconds": elapsed, "rate": sent / elapsed if elapsed else 0.0,
-                      "send_errors": errors}), flush=True)
+    print(
+        json.dumps(
+            {"sent": sent, "seconds": elapsed, "rate": sent / elapsed if elapsed else 0.0, "send_errors": errors}
+        ),
+        flush=True,
+    )
     return 0
 
 
@@ -1183,24 +1349,45 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trials", type=int, default=50, help="latency trials per phase (default 50; 0 = none)")
     parser.add_argument("--rate", type=int, default=10000, help="flood rate, OSC messages/s (default 10000)")
     parser.add_argument("--only", default=",".join(PEERS), help="comma-separated subset of: " + ", ".join(PEERS))
-    parser.add_argument("--vibsynth-flood", choices=("balance", "texture", "intensity"), default="balance",
-                        help="what the flood sends to vibsynth (default balance; the others set the level, so "
-                             "no latency is measured under them)")
-    parser.add_argument("--latency-clock", choices=("wall", "frame"), default="wall",
-                        help="clock of the latency columns (both are in the JSON; default wall, see latency_trials)")
-    parser.add_argument("--vibsynth-rev", default=None, metavar="REV",
-                        help="run vibsynth from `git archive REV` (C core built in a temporary folder) instead "
-                             "of the working tree, e.g. HEAD while the tree is being edited")
+    parser.add_argument(
+        "--vibsynth-flood",
+        choices=("balance", "texture", "intensity"),
+        default="balance",
+        help="what the flood sends to vibsynth (default balance; the others set the level, so "
+        "no latency is measured under them)",
+    )
+    parser.add_argument(
+        "--latency-clock",
+        choices=("wall", "frame"),
+        default="wall",
+        help="clock of the latency columns (both are in the JSON; default wall, see latency_trials)",
+    )
+    parser.add_argument(
+        "--vibsynth-rev",
+        default=None,
+        metavar="REV",
+        help="run vibsynth from `git archive REV` (C core built in a temporary folder) instead "
+        "of the working tree, e.g. HEAD while the tree is being edited",
+    )
     parser.add_argument("--jack-rate", type=int, default=48000)
     parser.add_argument("--jack-period", type=int, default=128)
     parser.add_argument("--warmup", type=float, default=2.0, help="seconds of streaming before measuring")
-    parser.add_argument("--baseline", type=float, default=5.0,
-                        help="seconds of the JACK server alone before each peer starts (its own xruns; 0 = skip)")
-    parser.add_argument("--timeout", type=float, default=None,
-                        help="hard bound on the whole run, s (default: 2 x the expected time + 120)")
+    parser.add_argument(
+        "--baseline",
+        type=float,
+        default=5.0,
+        help="seconds of the JACK server alone before each peer starts (its own xruns; 0 = skip)",
+    )
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=None,
+        help="hard bound on the whole run, s (default: 2 x the expected time + 120)",
+    )
     parser.add_argument("--json", type=Path, default=DEFAULT_JSON)
-    parser.add_argument("--no-merge", action="store_true",
-                        help="do not keep entries of peers not run now from an existing JSON file")
+    parser.add_argument(
+        "--no-merge", action="store_true", help="do not keep entries of peers not run now from an existing JSON file"
+    )
     args = parser.parse_args(argv)
     peers = [p.strip() for p in args.only.split(",") if p.strip()]
     unknown = [p for p in peers if p not in PEERS]
@@ -1232,16 +1419,32 @@ def main(argv: list[str] | None = None) -> int:
     signal.alarm(int(math.ceil(timeout)))
 
     gains, gains_origin = band_gains()
-    result = {"when": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine_info(),
-              "settings": {"seconds": args.seconds, "trials": args.trials, "flood_rate": args.rate,
-                           "jack_rate": args.jack_rate, "jack_period": args.jack_period, "channels": 1,
-                           "bands": N_BANDS, "centres_hz": [round(f, 3) for f in CENTRES], "rq": RQ,
-                           "band_gains": gains, "band_gains_origin": gains_origin,
-                           "vibsynth_flood": args.vibsynth_flood, "latency_gap_s": LAT_GAP_S,
-                           "silent_threshold": SILENT_THRESHOLD},
-              "peers": {}}
-    print(f"bench_peers: {', '.join(peers)}; {args.seconds:g} s per phase, {args.trials} latency trials, flood "
-          f"{args.rate} msg/s, JACK dummy {args.jack_rate} Hz / {args.jack_period}; bound {timeout:.0f} s", flush=True)
+    result = {
+        "when": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "machine": machine_info(),
+        "settings": {
+            "seconds": args.seconds,
+            "trials": args.trials,
+            "flood_rate": args.rate,
+            "jack_rate": args.jack_rate,
+            "jack_period": args.jack_period,
+            "channels": 1,
+            "bands": N_BANDS,
+            "centres_hz": [round(f, 3) for f in CENTRES],
+            "rq": RQ,
+            "band_gains": gains,
+            "band_gains_origin": gains_origin,
+            "vibsynth_flood": args.vibsynth_flood,
+            "latency_gap_s": LAT_GAP_S,
+            "silent_threshold": SILENT_THRESHOLD,
+        },
+        "peers": {},
+    }
+    print(
+        f"bench_peers: {', '.join(peers)}; {args.seconds:g} s per phase, {args.trials} latency trials, flood "
+        f"{args.rate} msg/s, JACK dummy {args.jack_rate} Hz / {args.jack_period}; bound {timeout:.0f} s",
+        flush=True,
+    )
     status = 0
     try:
         with tempfile.TemporaryDirectory(prefix="bench-peers-") as tmpdir:
@@ -1261,16 +1464,18 @@ def main(argv: list[str] | None = None) -> int:
                 try:
                     entry = run_peer(peer, args, tmp, gains)
                 except (KeyboardInterrupt, BenchTimeout) as exc:
-                    result["peers"][peer] = {"peer": peer, "when": time.strftime("%Y-%m-%d %H:%M:%S"),
-                                             "error": f"interrupted ({str(exc) or 'Ctrl-C or SIGTERM'})"}
+                    result["peers"][peer] = {
+                        "peer": peer,
+                        "when": time.strftime("%Y-%m-%d %H:%M:%S"),
+                        "error": f"interrupted ({str(exc) or 'Ctrl-C or SIGTERM'})",
+                    }
                     raise
                 result["peers"][peer] = entry
                 if "error" in entry:
                     status = 1
                 time.sleep(1.0)
     except (KeyboardInterrupt, BenchTimeout) as exc:
-        print(f"\nbench_peers: interrupted ({str(exc) or 'Ctrl-C or SIGTERM'}); stopping everything",
-              file=sys.stderr)
+        print(f"\nbench_peers: interrupted ({str(exc) or 'Ctrl-C or SIGTERM'}); stopping everything", file=sys.stderr)
         status = 130 if isinstance(exc, KeyboardInterrupt) else 3
     finally:
         signal.alarm(0)

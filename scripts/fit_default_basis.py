@@ -5,6 +5,7 @@
 
 tests/dsp/test_default_basis.py checks that the shipped file is what this produces.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -14,10 +15,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from vibsynth.research.basis_fit import fit_default_basis  # noqa: E402
-
 from vibsynth.cli.basis import summary  # noqa: E402
 from vibsynth.formats.basis_file import save_basis  # noqa: E402
+from vibsynth.research.basis_fit import fit_default_basis  # noqa: E402
 
 
 def main() -> int:

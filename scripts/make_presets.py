@@ -22,6 +22,7 @@ Usage::
 
     python scripts/make_presets.py [--psd ../shared/datasets/hatt-psd/psd.csv.gz] [--check]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,12 +35,11 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from vibsynth.research.basis_fit import HATT_CITATION, HATT_TERMS  # noqa: E402
-
 from vibsynth.dsp.basis import band_powers_from_psd, to_db  # noqa: E402
 from vibsynth.dsp.intensity import DEFAULT_RANGE_DB, intensity_response  # noqa: E402
-from vibsynth.formats.basis_file import default_basis
+from vibsynth.formats.basis_file import default_basis  # noqa: E402
 from vibsynth.formats.psd import read_psd_table  # noqa: E402
+from vibsynth.research.basis_fit import HATT_CITATION, HATT_TERMS  # noqa: E402
 from vibsynth.settings.presets import Preset, parse_preset, preset_to_yaml  # noqa: E402
 
 DEFAULT_PSD = ROOT.parent / "shared" / "datasets" / "hatt-psd" / "psd.csv.gz"
@@ -52,19 +52,31 @@ DATASET = "hatt-psd (spectra of the Penn Haptic Texture Toolkit AR texture model
 
 #: (preset name, HaTT texture, what it feels like / why it is here, tags)
 CHOICES: list[tuple[str, str, str, list[str]]] = [
-    ("metal-shelving", "Metal Shelving", "Perforated metal shelving: the darkest texture of the set, "
-     "a low, rumbling buzz.", ["metal", "hard", "dark"]),
+    (
+        "metal-shelving",
+        "Metal Shelving",
+        "Perforated metal shelving: the darkest texture of the set, a low, rumbling buzz.",
+        ["metal", "hard", "dark"],
+    ),
     ("brick", "Brick 2", "Rough brick: coarse, strong low-frequency bumps.", ["stone", "hard", "rough"]),
-    ("sandpaper-220", "Sandpaper 220", "Medium sandpaper (220 grit): grainy with a dark body.",
-     ["abrasive", "rough"]),
+    ("sandpaper-220", "Sandpaper 220", "Medium sandpaper (220 grit): grainy with a dark body.", ["abrasive", "rough"]),
     ("stone-tile", "Stone Tile 1", "Unglazed stone tile: dense and gritty.", ["stone", "hard"]),
-    ("sandpaper-100", "Sandpaper 100", "Coarse sandpaper (100 grit): rough grit, a little brighter than the "
-     "finer papers because its grains ring at higher frequencies.", ["abrasive", "rough"]),
+    (
+        "sandpaper-100",
+        "Sandpaper 100",
+        "Coarse sandpaper (100 grit): rough grit, a little brighter than the "
+        "finer papers because its grains ring at higher frequencies.",
+        ["abrasive", "rough"],
+    ),
     ("wood", "Wood", "Planed wood: smooth grain, darker than the middle of the range.", ["wood", "hard"]),
     ("book", "Book", "A book cover: smooth, slightly dark, with a soft body.", ["paper", "smooth"]),
     ("folder", "Folder", "A plastic folder: smooth and neutral-dark.", ["plastic", "smooth"]),
-    ("abs-plastic", "ABS Plastic", "ABS plastic: close to the average spectrum of the whole set.",
-     ["plastic", "neutral"]),
+    (
+        "abs-plastic",
+        "ABS Plastic",
+        "ABS plastic: close to the average spectrum of the whole set.",
+        ["plastic", "neutral"],
+    ),
     ("velvet", "Velvet", "Velvet: the set's average balance (0), a soft, even texture.", ["fabric", "neutral"]),
     ("plastic-mesh", "Plastic Mesh 1", "Plastic mesh: regular ridges, slightly bright.", ["plastic", "mesh"]),
     ("cardboard", "Cardboard", "Corrugated cardboard: dry and slightly bright.", ["paper"]),
@@ -72,8 +84,12 @@ CHOICES: list[tuple[str, str, str, list[str]]] = [
     ("canvas", "Canvas 1", "Canvas: coarse weave, bright and grainy.", ["fabric", "woven"]),
     ("cork", "Cork", "Cork board: bright, crumbly fine grain.", ["soft", "bright"]),
     ("carpet", "Carpet 2", "Carpet: bright fibre texture.", ["fabric", "bright"]),
-    ("artificial-grass", "Artificial Grass", "Artificial grass: stiff plastic blades flicking under the tool.",
-     ["plastic", "bright"]),
+    (
+        "artificial-grass",
+        "Artificial Grass",
+        "Artificial grass: stiff plastic blades flicking under the tool.",
+        ["plastic", "bright"],
+    ),
     ("towel", "Towel", "Terry towel: the brightest texture of the set.", ["fabric", "bright"]),
 ]
 
@@ -89,8 +105,7 @@ def analyse_textures(psd_path: Path) -> dict[str, dict[str, float]]:
     """Per texture: number of models, median t1, median balance, median 80-200 Hz level, low-band margin."""
     basis = default_basis()
     table = read_psd_table(psd_path)
-    band_db = to_db(band_powers_from_psd(table.freqs_hz, table.psd, centres=basis.centres_hz,
-                                         order=basis.filter_order))
+    band_db = to_db(band_powers_from_psd(table.freqs_hz, table.psd, centres=basis.centres_hz, order=basis.filter_order))
     t1 = basis.scores(band_db)[:, 0]
     response = intensity_response(table.freqs_hz)
     level_db = 10.0 * np.log10(np.trapezoid(table.psd * response, table.freqs_hz, axis=1))
@@ -133,8 +148,9 @@ def build_presets(psd_path: Path) -> dict[str, str]:
         flagged = s["low_margin_db"] < FLOOR_MARGIN_DB
         description = f"{blurb} HaTT texture '{texture}', median of {s['n_models']} models."
         if flagged:
-            description += " " + CAVEAT.format(texture=texture, margin=s["low_margin_db"],
-                                               texture_lower=texture.lower())
+            description += " " + CAVEAT.format(
+                texture=texture, margin=s["low_margin_db"], texture_lower=texture.lower()
+            )
         provenance = {
             "dataset": DATASET,
             "file": "shared/datasets/hatt-psd/psd.csv.gz",
@@ -158,10 +174,20 @@ def build_presets(psd_path: Path) -> dict[str, str]:
             "citation": HATT_CITATION,
             "terms": HATT_TERMS,
         }
-        preset = Preset(name=name, intensity=intensity, balance=balance, description=description,
-                        glide_ms=GLIDE_MS, program=program, tags=tuple(tags), provenance=provenance)
-        header = ("# Shipped vibsynth preset, generated by scripts/make_presets.py from the HaTT spectra.\n"
-                  "# Do not edit here: copy it to your user preset folder (see docs/presets.md) and edit the copy.\n")
+        preset = Preset(
+            name=name,
+            intensity=intensity,
+            balance=balance,
+            description=description,
+            glide_ms=GLIDE_MS,
+            program=program,
+            tags=tuple(tags),
+            provenance=provenance,
+        )
+        header = (
+            "# Shipped vibsynth preset, generated by scripts/make_presets.py from the HaTT spectra.\n"
+            "# Do not edit here: copy it to your user preset folder (see docs/presets.md) and edit the copy.\n"
+        )
         text = preset_to_yaml(preset, header=header)
         parse_preset(text, f"{name}.yaml", name=name)  # must validate
         files[f"{name}.yaml"] = text
@@ -172,11 +198,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--psd", type=Path, default=DEFAULT_PSD, help=f"PSD table (default {DEFAULT_PSD})")
     parser.add_argument("--out", type=Path, default=OUT_DIR, help=f"output folder (default {OUT_DIR})")
-    parser.add_argument("--check", action="store_true", help="only compare with the files in --out; exit 1 if different")
+    parser.add_argument(
+        "--check", action="store_true", help="only compare with the files in --out; exit 1 if different"
+    )
     args = parser.parse_args(argv)
     if not args.psd.exists():
-        print(f"make_presets: {args.psd}: no such file (clone the shared data beside the repo or pass --psd)",
-              file=sys.stderr)
+        print(
+            f"make_presets: {args.psd}: no such file (clone the shared data beside the repo or pass --psd)",
+            file=sys.stderr,
+        )
         return 2
     files = build_presets(args.psd)
     if args.check:
@@ -200,8 +230,10 @@ def main(argv: list[str] | None = None) -> int:
     for name, text in files.items():
         p = parse_preset(text, name, name=name[:-5])
         flag = "  (noise-floor caveat)" if p.provenance["noise_floor_caveat"] else ""
-        print(f"{p.program:3d} {p.name:<18} balance {p.balance:+.3f} intensity {p.intensity:.3f} "
-              f"{p.provenance['texture']}{flag}")
+        print(
+            f"{p.program:3d} {p.name:<18} balance {p.balance:+.3f} intensity {p.intensity:.3f} "
+            f"{p.provenance['texture']}{flag}"
+        )
     return 0
 
 

@@ -1,4 +1,5 @@
 """Shared fixtures: a seeded rng, the default basis, paths to ../shared data."""
+
 from __future__ import annotations
 
 from pathlib import Path

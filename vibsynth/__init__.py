@@ -4,6 +4,7 @@ The science (Bernard, Thoret, Huloux & Ystad, "The high/low frequency balance dr
 the perception of noisy vibrations") lives in :mod:`vibsynth.dsp`; the real-time
 engine in :mod:`vibsynth.engine`; OSC and MIDI adapters in :mod:`vibsynth.control`.
 """
+
 from __future__ import annotations
 
 __version__ = "0.1.0"

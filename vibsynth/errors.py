@@ -4,6 +4,7 @@ Every error that bad input can cause derives from :class:`VibsynthError`, so the
 command line and the servers catch one type, print one clear line and keep the
 last good state.
 """
+
 from __future__ import annotations
 
 __all__ = [

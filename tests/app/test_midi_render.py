@@ -1,4 +1,5 @@
 """Offline rendering of MIDI files: a slow 7-bit CC sweep gives a monotonic t1 trajectory without zipper steps."""
+
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -16,9 +17,9 @@ from vibsynth.engine.engine import Engine
 from vibsynth.formats.basis_file import default_basis
 from vibsynth.settings.config import default_config_data
 
-FS = 8000.0            # bands reach 1 kHz; a low rate keeps the test fast
-STEP_S = 0.0625        # one 7-bit CC step every 62.5 ms: a 8 s sweep over 128 values
-TICKS_PER_BEAT = 480   # with 120 bpm: 960 ticks per second
+FS = 8000.0  # bands reach 1 kHz; a low rate keeps the test fast
+STEP_S = 0.0625  # one 7-bit CC step every 62.5 ms: a 8 s sweep over 128 values
+TICKS_PER_BEAT = 480  # with 120 bpm: 960 ticks per second
 
 
 @pytest.fixture(scope="module")
@@ -107,8 +108,7 @@ def test_cc_sweep_has_no_zipper_steps(tmp_path, bank):
     seconds = 9.0
     ideal = ideal_ramp(bank, seconds)
     smooth, _ = render_midi_file(path, config=config(), engine=make_engine(bank), seconds=seconds)
-    stairs, _ = render_midi_file(path, config=config(cc_glide_max_ms=0), engine=make_engine(bank),
-                                 seconds=seconds)
+    stairs, _ = render_midi_file(path, config=config(cc_glide_max_ms=0), engine=make_engine(bank), seconds=seconds)
     a, b = int(0.6 * FS), int(8.4 * FS)
     smooth_db = _residual_db(smooth[:, 0], ideal, a, b)
     stairs_db = _residual_db(stairs[:, 0], ideal, a, b)
@@ -125,16 +125,16 @@ def test_notes_gate_the_texture_in_a_file(tmp_path, bank):
     mid = mido.MidiFile(ticks_per_beat=TICKS_PER_BEAT)
     track = mido.MidiTrack()
     mid.tracks.append(track)
-    track.append(mido.Message("note_on", note=60, velocity=127, time=480))      # 0.5 s
-    track.append(mido.Message("note_on", note=64, velocity=100, time=480))      # 1.0 s, stacked
-    track.append(mido.Message("note_off", note=60, time=480))                   # 1.5 s: still sounding
-    track.append(mido.Message("note_off", note=64, time=480))                   # 2.0 s: release
+    track.append(mido.Message("note_on", note=60, velocity=127, time=480))  # 0.5 s
+    track.append(mido.Message("note_on", note=64, velocity=100, time=480))  # 1.0 s, stacked
+    track.append(mido.Message("note_off", note=60, time=480))  # 1.5 s: still sounding
+    track.append(mido.Message("note_off", note=64, time=480))  # 2.0 s: release
     path = tmp_path / "notes.mid"
     mid.save(path)
     data = default_config_data()
     data["midi"].update(mode="gate", release_ms=100.0)
     x, _ = render_midi_file(path, config=SimpleNamespace(data=data), engine=make_engine(bank))
-    rms = lambda t0, t1: float(np.sqrt(np.mean(x[int(t0 * FS):int(t1 * FS), 0] ** 2)))  # noqa: E731
+    rms = lambda t0, t1: float(np.sqrt(np.mean(x[int(t0 * FS) : int(t1 * FS), 0] ** 2)))  # noqa: E731
     assert x.shape[0] == int(round((2.0 + 0.1 + 0.25) * FS))
     assert rms(0.0, 0.45) == 0.0
     assert rms(0.6, 0.95) > 0 and rms(1.1, 1.95) > 0
@@ -143,7 +143,9 @@ def test_notes_gate_the_texture_in_a_file(tmp_path, bank):
 
 
 def test_render_through_service_build_engine(tmp_path):
-    service = pytest.importorskip("vibsynth.app.service", reason="vibsynth.app.service (engine wiring) is not there yet")
+    service = pytest.importorskip(
+        "vibsynth.app.service", reason="vibsynth.app.service (engine wiring) is not there yet"
+    )
     from vibsynth.settings.config import load_config
 
     path = tmp_path / "short.mid"

@@ -1,4 +1,5 @@
 """``vibsynth config show|check|path``."""
+
 from __future__ import annotations
 
 import json

@@ -1,4 +1,5 @@
 """analyze / render / basis from the command line, including every bad-input case."""
+
 from __future__ import annotations
 
 import json
@@ -17,12 +18,33 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vibsynth", *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "vibsynth", *args], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
 
 
 def test_render_then_analyze_round_trip(tmp_path, capsys):
     out = tmp_path / "t.wav"
-    assert main(["render", "--balance", "-0.7", "--intensity", "0.6", "--seconds", "1", "--rate", "8000", "-o", str(out), "--seed", "3"]) == 0
+    assert (
+        main(
+            [
+                "render",
+                "--balance",
+                "-0.7",
+                "--intensity",
+                "0.6",
+                "--seconds",
+                "1",
+                "--rate",
+                "8000",
+                "-o",
+                str(out),
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     assert main(["analyze", str(out), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)[0]
@@ -34,7 +56,23 @@ def test_render_then_analyze_round_trip(tmp_path, capsys):
 @pytest.mark.parametrize("variant", ["S1", "S1:8", "S2:8", "M"])
 def test_render_variants_from_a_recording(tmp_path, capsys, variant):
     src = tmp_path / "src.wav"
-    main(["render", "--balance", "0.8", "--intensity", "0.9", "--seconds", "1", "--rate", "4000", "-o", str(src), "--seed", "1"])
+    main(
+        [
+            "render",
+            "--balance",
+            "0.8",
+            "--intensity",
+            "0.9",
+            "--seconds",
+            "1",
+            "--rate",
+            "4000",
+            "-o",
+            str(src),
+            "--seed",
+            "1",
+        ]
+    )
     out = tmp_path / "v.wav"
     assert main(["render", "--from", str(src), "--variant", variant, "--seconds", "1", "-o", str(out)]) == 0
     capsys.readouterr()
@@ -89,8 +127,18 @@ def _write(path: Path, fs: int, data: np.ndarray) -> Path:
         (lambda d: (d / "junk.wav").write_bytes(b"RIFF0000WAVEjunk") and d / "junk.wav", "not a readable WAV"),
         (lambda d: _write(d / "nan.wav", 8000, np.full(8000, np.nan, dtype=np.float32)), "NaN"),
         (lambda d: _write(d / "silent.wav", 8000, np.zeros(8000, dtype=np.int16)), "silent"),
-        (lambda d: _write(d / "short.wav", 8000, (np.random.default_rng(0).standard_normal(400) * 1000).astype(np.int16)), "too short"),
-        (lambda d: _write(d / "lowrate.wav", 1000, (np.random.default_rng(0).standard_normal(2000) * 1000).astype(np.int16)), "too low"),
+        (
+            lambda d: _write(
+                d / "short.wav", 8000, (np.random.default_rng(0).standard_normal(400) * 1000).astype(np.int16)
+            ),
+            "too short",
+        ),
+        (
+            lambda d: _write(
+                d / "lowrate.wav", 1000, (np.random.default_rng(0).standard_normal(2000) * 1000).astype(np.int16)
+            ),
+            "too low",
+        ),
         (lambda d: (d / "x.mp3").write_bytes(b"ID3") and d / "x.mp3", "unsupported file type"),
         (lambda d: (d / "c.csv").write_text("1\n2\n") and d / "c.csv", "--rate"),
     ],

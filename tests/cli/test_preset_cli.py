@@ -1,4 +1,5 @@
 """``vibsynth preset ...``: list, show, new, from-recording (round trip through the engine), play -o."""
+
 from __future__ import annotations
 
 import json
@@ -16,9 +17,26 @@ from vibsynth.settings.presets import load_preset
 
 FS = 8000.0
 # A small, fast bank: 8 kHz, 2 s loops, 25 levels over [-2, 2]; no disk cache.
-FAST = ["--set", "audio.rate=8000", "--set", "bank.loop_seconds=2", "--set", "bank.levels=25",
-        "--set", "bank.balance_min=-2", "--set", "bank.balance_max=2", "--set", "knobs.balance_min=-2",
-        "--set", "knobs.balance_max=2", "--set", "bank.cache_dir=''", "--set", "audio.block_size=256"]
+FAST = [
+    "--set",
+    "audio.rate=8000",
+    "--set",
+    "bank.loop_seconds=2",
+    "--set",
+    "bank.levels=25",
+    "--set",
+    "bank.balance_min=-2",
+    "--set",
+    "bank.balance_max=2",
+    "--set",
+    "knobs.balance_min=-2",
+    "--set",
+    "knobs.balance_max=2",
+    "--set",
+    "bank.cache_dir=''",
+    "--set",
+    "audio.block_size=256",
+]
 
 
 @pytest.fixture(autouse=True)
@@ -51,8 +69,11 @@ def test_list_table_and_json(capsys):
 
 def test_list_sorted_by_balance(capsys):
     _, out, _ = run(capsys, "preset", "list", "--sort", "balance")
-    balances = [float(line.split()[2]) for line in out.splitlines()[1:] if line and line[0] != "\n" and
-                len(line.split()) > 4 and line.split()[2][0] in "+-"]
+    balances = [
+        float(line.split()[2])
+        for line in out.splitlines()[1:]
+        if line and line[0] != "\n" and len(line.split()) > 4 and line.split()[2][0] in "+-"
+    ]
     assert balances == sorted(balances) and len(balances) >= 12
 
 
@@ -67,8 +88,22 @@ def test_show_unknown_suggests(capsys):
 
 
 def test_new_then_override_and_force(capsys, isolated):
-    code, out, _ = run(capsys, "preset", "new", "mine", "--balance", "0.5", "--intensity", "0.25",
-                       "--tags", "soft,test", "--program", "100", "--glide-ms", "80")
+    code, out, _ = run(
+        capsys,
+        "preset",
+        "new",
+        "mine",
+        "--balance",
+        "0.5",
+        "--intensity",
+        "0.25",
+        "--tags",
+        "soft,test",
+        "--program",
+        "100",
+        "--glide-ms",
+        "80",
+    )
     assert code == 0 and (isolated / "mine.yaml").exists()
     p = load_preset(isolated / "mine.yaml")
     assert (p.balance, p.intensity, p.tags, p.program, p.glide_ms) == (0.5, 0.25, ("soft", "test"), 100, 80.0)
@@ -120,8 +155,18 @@ def test_from_recording_round_trip_through_the_engine(capsys, tmp_path, isolated
     write_wav(recording, _texture(basis, rng, balance=balance, knob=knob), FS)
     truth = analyze(read_recording(recording).samples, fs=FS, basis=basis, ceiling_db=-40.0, range_db=40.0)
 
-    code, out, err = run(capsys, "preset", "from-recording", str(recording), "--name", "rec",
-                         "--set", "knobs.ceiling_db=-40", "--set", "knobs.range_db=40")
+    code, out, err = run(
+        capsys,
+        "preset",
+        "from-recording",
+        str(recording),
+        "--name",
+        "rec",
+        "--set",
+        "knobs.ceiling_db=-40",
+        "--set",
+        "knobs.range_db=40",
+    )
     assert code == 0, err
     preset = load_preset(isolated / "rec.yaml")
     assert preset.balance == pytest.approx(truth.balance, abs=1e-3)
@@ -131,10 +176,23 @@ def test_from_recording_round_trip_through_the_engine(capsys, tmp_path, isolated
     assert prov["t1"] == pytest.approx(truth.t1, abs=1e-3)
 
     rendered = tmp_path / "out.wav"
-    code, out, err = run(capsys, "preset", "play", "rec", "--seconds", "3", "-o", str(rendered),
-                         "--set", "knobs.ceiling_db=-40", "--set", "knobs.range_db=40", *FAST)
+    code, out, err = run(
+        capsys,
+        "preset",
+        "play",
+        "rec",
+        "--seconds",
+        "3",
+        "-o",
+        str(rendered),
+        "--set",
+        "knobs.ceiling_db=-40",
+        "--set",
+        "knobs.range_db=40",
+        *FAST,
+    )
     assert code == 0, err
-    samples = read_recording(rendered).samples[int(0.5 * FS):]  # after the preset's glide
+    samples = read_recording(rendered).samples[int(0.5 * FS) :]  # after the preset's glide
     again = analyze(samples, fs=FS, basis=basis, ceiling_db=-40.0, range_db=40.0)
     # The engine renders S1 (M + t1 V1) by interpolating a bank: balance within a small tolerance.
     assert again.balance == pytest.approx(truth.balance, abs=0.06)
@@ -148,8 +206,9 @@ def test_from_recording_exact_with_the_dsp_core(capsys, tmp_path, isolated, basi
     assert run(capsys, "preset", "from-recording", str(recording), "--set", "knobs.ceiling_db=-40")[0] == 0
     preset = load_preset(isolated / "r.yaml")
     level = knob_to_level_db(preset.intensity, ceiling_db=-40.0, range_db=40.0)
-    x = synthesize(basis.spectrum_for_balance(preset.balance), fs=FS, n_samples=int(2 * FS), level_db=level,
-                   rng=rng).signal
+    x = synthesize(
+        basis.spectrum_for_balance(preset.balance), fs=FS, n_samples=int(2 * FS), level_db=level, rng=rng
+    ).signal
     again = analyze(x, fs=FS, basis=basis, ceiling_db=-40.0, range_db=40.0)
     assert again.balance == pytest.approx(preset.balance, abs=2e-3)
     assert again.intensity_knob == pytest.approx(preset.intensity, abs=1e-3)
@@ -195,7 +254,7 @@ def test_play_to_wav_renders_the_preset(capsys, tmp_path, basis):
     from vibsynth.settings.library import PresetLibrary, shipped_presets_dir
 
     brick = PresetLibrary(shipped_presets_dir(), None).get("brick")
-    result = analyze(x[int(0.5 * FS):], fs=FS, basis=basis, ceiling_db=-40.0, range_db=40.0)
+    result = analyze(x[int(0.5 * FS) :], fs=FS, basis=basis, ceiling_db=-40.0, range_db=40.0)
     assert result.balance == pytest.approx(brick.balance, abs=0.06)
 
 

@@ -1,4 +1,5 @@
 """CLI: compare, dissim fit, encode/decode (run in-process through vibsynth.cli.main)."""
+
 from __future__ import annotations
 
 import json
@@ -71,17 +72,31 @@ def test_dissim_fit_bad_csv(tmp_path, capsys):
 
 def test_encode_decode_round_trip(basis, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("VIBSYNTH_CACHE_DIR", str(tmp_path / "cache"))
-    x = np.concatenate([
-        synthesize(basis.mean_db, fs=FS, n_samples=int(3 * FS), level_db=lv, rng=np.random.default_rng(s)).signal
-        for s, lv in ((1, -42.0), (2, -34.0))])
+    x = np.concatenate(
+        [
+            synthesize(basis.mean_db, fs=FS, n_samples=int(3 * FS), level_db=lv, rng=np.random.default_rng(s)).signal
+            for s, lv in ((1, -42.0), (2, -34.0))
+        ]
+    )
     write_wav(tmp_path / "in.wav", x, FS)
     assert main(["encode", str(tmp_path / "in.wav"), "-o", str(tmp_path / "a.vbt"), "--json"]) == 0
     enc = json.loads(capsys.readouterr().out)
     assert enc["n_records"] == 2 and enc["bytes_per_second"] < 20
     assert enc["ratio_vs_pcm16_source"] > 300
     assert enc["quality"]["band_error_rms_db"] < 1.0
-    assert main(["decode", str(tmp_path / "a.vbt"), "-o", str(tmp_path / "out.wav"),
-                 "--reference", str(tmp_path / "in.wav")]) == 0
+    assert (
+        main(
+            [
+                "decode",
+                str(tmp_path / "a.vbt"),
+                "-o",
+                str(tmp_path / "out.wav"),
+                "--reference",
+                str(tmp_path / "in.wav"),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "non-stationarity: original" in text and "vs 8-bit at 2.8 kHz" in text
     assert (tmp_path / "out.wav").stat().st_size > 1000

@@ -1,4 +1,5 @@
 """`vibsynth serve` on a terminal: a status line every second; not on a pipe."""
+
 from __future__ import annotations
 
 import os
@@ -9,8 +10,22 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-ARGS = [sys.executable, "-m", "vibsynth", "serve", "--output", "null", "--no-osc", "--no-midi",
-        "--intensity", "0.3", "--balance", "0.5", "--seconds", "3.5"]
+ARGS = [
+    sys.executable,
+    "-m",
+    "vibsynth",
+    "serve",
+    "--output",
+    "null",
+    "--no-osc",
+    "--no-midi",
+    "--intensity",
+    "0.3",
+    "--balance",
+    "0.5",
+    "--seconds",
+    "3.5",
+]
 
 
 def _run_on_a_pty(tmp_path: Path) -> str:

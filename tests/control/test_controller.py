@@ -1,4 +1,5 @@
 """Controller: target state under out-of-order timetags, concurrent setters, the schedule cap."""
+
 from __future__ import annotations
 
 import threading

@@ -1,4 +1,5 @@
 """Analysis of recordings and the paper's experiment-3 variants."""
+
 from __future__ import annotations
 
 import numpy as np

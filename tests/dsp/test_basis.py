@@ -1,4 +1,5 @@
 """Basis: PCA properties, normalisation idempotence, balance units, serialisation, the shipped default."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -50,7 +51,11 @@ def test_fit_recovers_a_planted_tilt(rng):
     centres = np.geomspace(10, 1000, 30)
     tilt = np.log(centres) - np.log(centres).mean()
     tilt /= np.linalg.norm(tilt)
-    spectra = 5.0 * rng.standard_normal((200, 1)) * tilt + 0.3 * rng.standard_normal((200, 30)) + rng.uniform(-50, 0, (200, 1))
+    spectra = (
+        5.0 * rng.standard_normal((200, 1)) * tilt
+        + 0.3 * rng.standard_normal((200, 30))
+        + rng.uniform(-50, 0, (200, 1))
+    )
     fitted = fit_basis(spectra, centres=centres)
     assert abs(fitted.v1 @ tilt) > 0.99
     assert fitted.v1 @ tilt > 0  # sign convention: brighter = positive

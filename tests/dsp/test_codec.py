@@ -1,4 +1,5 @@
 """Codec: stationary sets, segmented trajectories, quantiser, schedule, quality (synthetic, seeded)."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,5 @@
 """The shipped default basis is exactly what fitting shared/datasets/hatt-psd gives."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,5 @@
 """Dissimilarity model: metric properties (property-style, seeded), weights, MDS, Procrustes."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,5 @@
 """Filter bank: geometry, rate independence, Parseval exactness."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -78,7 +79,7 @@ def test_time_domain_butterworth_agrees_with_fft_analysis(rng):
         fc = BAND_CENTRES_HZ[k]
         edges = [fc / np.sqrt(BAND_RATIO), fc * np.sqrt(BAND_RATIO)]
         sos = butter(2, edges, btype="bandpass", fs=fs, output="sos")
-        y = sosfilt(sos, np.tile(x, 2))[x.size:]  # steady state on the periodic signal
+        y = sosfilt(sos, np.tile(x, 2))[x.size :]  # steady state on the periodic signal
         assert 10 * np.log10(np.mean(y**2)) == pytest.approx(fft_db[k], abs=0.5)
 
 

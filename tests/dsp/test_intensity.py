@@ -1,4 +1,5 @@
 """Intensity model and knob mapping."""
+
 from __future__ import annotations
 
 import math

@@ -1,4 +1,5 @@
 """Exact synthesis: band powers, intensity, loops, balance round trip; and the iterative reference."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -81,7 +82,9 @@ def test_reachable_range_covers_real_recordings(basis):
 def test_measured_balance_is_monotonic_in_the_requested_balance(basis):
     shaper = SpectralShaper(fs=4000.0, n_samples=4000)
     measured = [
-        float(basis.balance_from_t1(basis.scores(shaper.weights_band_db(shaper.solve_balance(basis, b, level_db=-40)))[0]))
+        float(
+            basis.balance_from_t1(basis.scores(shaper.weights_band_db(shaper.solve_balance(basis, b, level_db=-40)))[0])
+        )
         for b in np.linspace(-6, 6, 97)
     ]
     assert np.all(np.diff(measured) >= -1e-9)

@@ -4,6 +4,7 @@ They are marked ``e2e`` and skip when the needed server is missing, unless
 ``VIBSYNTH_E2E_REQUIRED=1`` (CI), where they fail. Run them under a private JACK
 server: ``scripts/with_jack.sh -- python -m pytest tests/e2e -q``.
 """
+
 from __future__ import annotations
 
 import pytest

@@ -13,11 +13,12 @@ Usage (typical PortAudio test)::
 :meth:`JackCapture.frame_time_now` and :attr:`JackCapture.start_frame` put
 captured samples and events on the same JACK frame clock (for latency).
 """
+
 from __future__ import annotations
 
 import os
 import threading
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -101,8 +102,11 @@ class JackCapture:
 
         JackCapture._count += 1
         # The server named now (tests switch servers within one process): explicit, not cached.
-        self.client = jack.Client(f"{name}-{os.getpid()}-{JackCapture._count}", no_start_server=True,
-                                  servername=os.environ.get("JACK_DEFAULT_SERVER") or None)
+        self.client = jack.Client(
+            f"{name}-{os.getpid()}-{JackCapture._count}",
+            no_start_server=True,
+            servername=os.environ.get("JACK_DEFAULT_SERVER") or None,
+        )
         self.rate = int(self.client.samplerate)
         self.inports = [self.client.inports.register(f"in_{k + 1}") for k in range(n_ports)]
         self.data = np.zeros((int(round(seconds * self.rate)), n_ports), dtype=np.float32)
@@ -121,7 +125,7 @@ class JackCapture:
         if pos == 0:
             self.start_frame = self.client.last_frame_time
         for k, port in enumerate(self.inports):
-            self.data[pos:pos + n, k] = port.get_array()[:n]
+            self.data[pos : pos + n, k] = port.get_array()[:n]
         self.frames_captured = pos + n
         if self.frames_captured >= self.data.shape[0]:
             self._done.set()
@@ -160,7 +164,7 @@ class JackCapture:
         finally:
             self.client.close()
 
-    def __enter__(self) -> "JackCapture":
+    def __enter__(self) -> JackCapture:
         return self
 
     def __exit__(self, *exc: object) -> None:

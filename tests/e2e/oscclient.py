@@ -1,4 +1,5 @@
 """One UDP OSC client for the end-to-end tests (our own codec; liblo is the independent one)."""
+
 from __future__ import annotations
 
 import socket
@@ -27,8 +28,9 @@ class OscClient:
     def send(self, address: str, *args: object, types: str | None = None) -> None:
         self.sock.sendto(encode_message(address, args, types), self.target)
 
-    def request(self, address: str, *args: object, expect: str, timeout: float = 5.0,
-                types: str | None = None) -> Message:
+    def request(
+        self, address: str, *args: object, expect: str, timeout: float = 5.0, types: str | None = None
+    ) -> Message:
         """Send, then return the first reply whose address is ``expect`` (socket.timeout if none)."""
         self.send(address, *args, types=types)
         self.sock.settimeout(timeout)

@@ -7,6 +7,7 @@
 
 Run: ``scripts/with_jack.sh -- python -m pytest tests/e2e/test_audio_jack.py -q``.
 """
+
 from __future__ import annotations
 
 import time
@@ -32,7 +33,6 @@ from vibsynth.formats.basis_file import default_basis
 from vibsynth.settings.config import load_config
 
 pytestmark = pytest.mark.e2e
-
 
 
 FS = 48000
@@ -86,7 +86,7 @@ def test_a_spectrum_and_intensity(rig, config, knob, balance):
     basis = default_basis()
     knobs = config.data["knobs"]
     expected = knob_to_level_db(knob, ceiling_db=knobs["ceiling_db"], range_db=knobs["range_db"])
-    for attempt in range(3):
+    for _attempt in range(3):
         cap.reset()
         cap.arm()
         assert cap.wait(), "capture did not complete"
@@ -130,7 +130,7 @@ def test_b_balance_sweep_is_smooth_and_monotonic(rig):
     for s in range(0, x.size - win + 1, win):
         idx = np.arange(s + offset, s + offset + win) % bank.n_samples
         levels = bank.signals[inside][:, idx].astype(np.float64).T
-        weights, _ = nnls(levels, x[s:s + win])
+        weights, _ = nnls(levels, x[s : s + win])
         played.append(float(weights @ bank.balances[inside] / weights.sum()))
     played = np.array(played)
     assert np.all(np.diff(played) >= -1e-3), np.round(played, 3)
@@ -143,8 +143,9 @@ def test_c_no_underflow_in_10_seconds(jack_server, config):
     """0 underflows in 10 s of streaming (1 spurious allowed), the issue's check (c).
 
     Underflows under a control flood are measured by benchmarks/bench_engine.py and the
-    OSC load test (tests/e2e/test_osc_e2e.py). No capture client here: a second Python real-time callback in this process would
-    share the GIL with ours, which is not the production set-up. PortAudio counts every
+    OSC load test (tests/e2e/test_osc_e2e.py). No capture client here: a second Python
+    real-time callback in this process would share the GIL with ours, which is not the
+    production set-up. PortAudio counts every
     JACK xrun as an underflow, including the dummy driver's own late wake-ups on this
     VM's timers (jackd logs "JackTimedDriver::Process XRun = 13 usec"), so the check takes
     the best of up to three 10 s windows: a real regression (an engine too slow, a lock,
@@ -196,12 +197,12 @@ def test_d_mute_reaches_silence_within_fade(rig, config):
     # Align capture and replica on the first 4096 non-silent samples (noise: one sharp peak).
     nz = np.flatnonzero(x)
     assert nz.size > fade, "nothing was captured before the mute"
-    seg = x[nz[0]:nz[0] + 4096].astype(np.float64)
+    seg = x[nz[0] : nz[0] + 4096].astype(np.float64)
     corr = fftconvolve(y.astype(np.float64), seg[::-1], mode="valid")
     offset = int(np.argmax(corr)) - int(nz[0])  # replica index = capture index + offset
     overlap = slice(max(0, -offset), min(x.size, y.size - offset))
-    np.testing.assert_allclose(x[overlap], y[overlap.start + offset:overlap.stop + offset], atol=1e-7)
+    np.testing.assert_allclose(x[overlap], y[overlap.start + offset : overlap.stop + offset], atol=1e-7)
     silent_from = mute_at + fade - offset  # capture index where silence must have begun
     assert 0 < silent_from < x.size
-    assert np.abs(x[silent_from - fade - 64:silent_from - fade]).max() > 0  # still sounding before the mute
+    assert np.abs(x[silent_from - fade - 64 : silent_from - fade]).max() > 0  # still sounding before the mute
     assert not x[silent_from:].any()

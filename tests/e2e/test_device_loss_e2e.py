@@ -14,12 +14,12 @@ Skips when ``jackd`` or JACK-Client is missing, unless ``VIBSYNTH_E2E_REQUIRED=1
 Run: ``.venv/bin/python -m pytest tests/e2e/test_device_loss_e2e.py -q -s`` (no
 ``with_jack.sh`` needed).
 """
+
 from __future__ import annotations
 
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -65,15 +65,23 @@ class JackServer:
         self.killed = False
 
     def _ready(self) -> bool:
-        return subprocess.run(["jack_wait", "-w", "-t", "10"], env=self.env, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL).returncode == 0
+        return (
+            subprocess.run(
+                ["jack_wait", "-w", "-t", "10"], env=self.env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+            ).returncode
+            == 0
+        )
 
     def start(self) -> float:
         """Start it; returns the time.monotonic() at which it answers."""
         for realtime in (["-R"], []):
             with open(self.log, "a") as log:
-                self.proc = subprocess.Popen(["jackd", "-n", self.name, *realtime, "-d", "dummy", "-r", "48000",
-                                              "-p", "128"], env=self.env, stdout=log, stderr=subprocess.STDOUT)
+                self.proc = subprocess.Popen(
+                    ["jackd", "-n", self.name, *realtime, "-d", "dummy", "-r", "48000", "-p", "128"],
+                    env=self.env,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                )
             if self._ready():
                 self.killed = False
                 return time.monotonic()
@@ -120,8 +128,18 @@ class Serve:
         self.port = free_udp_port()
         self.log_path = tmp / "serve.log"
         env = dict(jack.env, VIBSYNTH_HOST_API="JACK", PYTHONPATH=str(ROOT))
-        cmd = [sys.executable, "-m", "vibsynth", "-v", "serve", "--output", "sounddevice", "--no-midi",
-               "--osc-port", str(self.port)]
+        cmd = [
+            sys.executable,
+            "-m",
+            "vibsynth",
+            "-v",
+            "serve",
+            "--output",
+            "sounddevice",
+            "--no-midi",
+            "--osc-port",
+            str(self.port),
+        ]
         with open(self.log_path, "w") as log:
             self.proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
         self.osc = Osc(self.port)
@@ -133,7 +151,7 @@ class Serve:
             try:
                 self.osc.request("/vibsynth/ping", 1, expect="/vibsynth/pong", timeout=0.5)
                 break
-            except (socket.timeout, ConnectionRefusedError):
+            except (TimeoutError, ConnectionRefusedError):
                 pass
 
     def log(self) -> str:
@@ -147,8 +165,9 @@ class Serve:
             now = time.monotonic()
             if status.get("output") == state:
                 return status, now
-            assert now < deadline, f"output still {status.get('output')!r} ({status.get('output_reason')!r}):\n" \
-                                   + self.log()
+            assert now < deadline, (
+                f"output still {status.get('output')!r} ({status.get('output_reason')!r}):\n" + self.log()
+            )
             time.sleep(0.02)
 
     def sigterm(self) -> tuple[int, float]:
@@ -214,8 +233,13 @@ def rms_of_serve_output(seconds: float = 0.3) -> float:
     Captured from a separate process: earlier tests in this process may hold PortAudio's JACK
     client on another server, and libjack's per-process state then hides this server's ports.
     """
-    done = subprocess.run([sys.executable, "-c", _RMS_SCRIPT, str(seconds)], capture_output=True, text=True,
-                          timeout=seconds + 20.0, env=dict(os.environ))
+    done = subprocess.run(
+        [sys.executable, "-c", _RMS_SCRIPT, str(seconds)],
+        capture_output=True,
+        text=True,
+        timeout=seconds + 20.0,
+        env=dict(os.environ),
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     value = float(done.stdout.strip().splitlines()[-1])
     assert value >= 0.0, "JACK capture did not complete"
@@ -278,9 +302,11 @@ def test_lost_jack_server_is_reported_and_recovered_with_the_same_knobs(jack, tm
         assert abs(20 * np.log10(after / before)) < 1.5
         code, took = serve.sigterm()
         log = serve.log()
-        print(f"\nJACK killed -> /status 'device lost' in {1000 * detect:.0f} ms; server back -> sound in "
-              f"{resumed:.2f} s; RMS before {before:.4f}, after {after:.4f}; SIGTERM after recovery: exit "
-              f"{code} in {took:.2f} s")
+        print(
+            f"\nJACK killed -> /status 'device lost' in {1000 * detect:.0f} ms; server back -> sound in "
+            f"{resumed:.2f} s; RMS before {before:.4f}, after {after:.4f}; SIGTERM after recovery: exit "
+            f"{code} in {took:.2f} s"
+        )
         assert code == 0 and took < EXIT_WITHIN_S, log
         assert "audio device lost: JACK server shut down" in log and "audio device back" in log
         assert "Traceback" not in log

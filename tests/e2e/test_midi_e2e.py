@@ -6,6 +6,7 @@ the server named by ``JACK_DEFAULT_SERVER`` when one is running (e.g. under
 They SKIP with a clear message when JACK/rtmidi are missing, unless
 ``VIBSYNTH_E2E_REQUIRED=1`` (CI), where they FAIL instead.
 """
+
 from __future__ import annotations
 
 import os
@@ -22,7 +23,6 @@ import pytest
 from tests.e2e.jackutil import REALTIME  # noqa: E402
 
 pytestmark = pytest.mark.e2e
-
 
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -56,8 +56,12 @@ def jack_env():
     proc = None
     if not (env.get("JACK_DEFAULT_SERVER") and _jack_ok(env)):
         env["JACK_DEFAULT_SERVER"] = f"vibsynth-midi-e2e-{os.getpid()}"
-        proc = subprocess.Popen(["jackd", "-n", env["JACK_DEFAULT_SERVER"], "-d", "dummy", "-r", "48000", "-p", "128"],
-                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        proc = subprocess.Popen(
+            ["jackd", "-n", env["JACK_DEFAULT_SERVER"], "-d", "dummy", "-r", "48000", "-p", "128"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         if subprocess.run(["jack_wait", "-w", "-t", "10"], env=env, capture_output=True).returncode != 0:
             proc.kill()
             unavailable("jackd (dummy driver) did not start")
@@ -103,7 +107,7 @@ RECEIVER = textwrap.dedent("""
     from vibsynth.control.controller import Controller
     from vibsynth.engine.bank import BankSpec, build_bank
     from vibsynth.engine.engine import Engine
-    from vibsynth.formats import default_basis
+    from vibsynth.formats.basis_file import default_basis
 
     fs, seconds, out_path = 8000.0, float(sys.argv[1]), sys.argv[2]
     engine = Engine(build_bank(default_basis(), BankSpec(fs=fs, loop_seconds=1.0, levels=15)), channels=1,
@@ -133,22 +137,29 @@ RECEIVER = textwrap.dedent("""
 @REALTIME
 def test_virtual_input_notes_and_ccs_change_the_output(jack_env, tmp_path):
     out_path = tmp_path / "out.npy"
-    receiver = subprocess.Popen([sys.executable, "-c", RECEIVER, "6.0", str(out_path)], cwd=ROOT, env=jack_env,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    receiver = subprocess.Popen(
+        [sys.executable, "-c", RECEIVER, "6.0", str(out_path)],
+        cwd=ROOT,
+        env=jack_env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     assert receiver.stdout is not None
     line = receiver.stdout.readline()
     assert line.startswith("READY"), line + receiver.stderr.read()
     # silent 1 s; note on (dark: CC74 = 0); at 2.5 s bright (CC74 = 127); note off at 4 s
     script = "sleep 1.0\ncc 74 0\non 60 127\nsleep 1.5\ncc 74 127\nsleep 1.5\noff 60\n"
-    sender = subprocess.run([sys.executable, "-c", SENDER], input=script, cwd=ROOT, env=jack_env, text=True,
-                            capture_output=True, timeout=60)
+    sender = subprocess.run(
+        [sys.executable, "-c", SENDER], input=script, cwd=ROOT, env=jack_env, text=True, capture_output=True, timeout=60
+    )
     assert sender.returncode == 0, sender.stderr
     rest, err = receiver.communicate(timeout=60)
     assert receiver.returncode == 0, err
     assert "DONE" in rest
     x = np.load(out_path)
     fs = 8000
-    rms = lambda a, b: float(np.sqrt(np.mean(x[int(a * fs):int(b * fs)] ** 2)))  # noqa: E731
+    rms = lambda a, b: float(np.sqrt(np.mean(x[int(a * fs) : int(b * fs)] ** 2)))  # noqa: E731
     # the sender connects within a moment; allow 0.5 s of scheduling slack on a busy machine
     assert rms(0.0, 0.8) == 0.0
     loud_dark, loud_bright = rms(1.6, 2.4), rms(3.1, 3.9)
@@ -160,7 +171,12 @@ def test_virtual_input_notes_and_ccs_change_the_output(jack_env, tmp_path):
     from vibsynth.formats.basis_file import default_basis
 
     basis = default_basis()
-    t1 = lambda a, b: float(basis.scores(to_db(band_power_frames(x[int(a * fs):int(b * fs)].astype(float), fs=fs)))[:, 0].mean())  # noqa: E731,E501
+
+    def t1(a, b):
+        return float(
+            basis.scores(to_db(band_power_frames(x[int(a * fs) : int(b * fs)].astype(float), fs=fs)))[:, 0].mean()
+        )  # noqa: E731,E501
+
     assert t1(3.1, 3.9) > t1(1.6, 2.4) + 3.0
 
 
@@ -173,8 +189,14 @@ def test_serve_opens_the_virtual_input(jack_env, tmp_path):
     except SystemExit:
         pytest.skip("`vibsynth serve` (or its MIDI flags) is not wired yet")
     env = dict(jack_env, VIBSYNTH_OSC_ENABLED="false")
-    serve = subprocess.Popen([sys.executable, "-m", "vibsynth", "-v", "serve", "--midi-virtual"], cwd=ROOT, env=env,
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    serve = subprocess.Popen(
+        [sys.executable, "-m", "vibsynth", "-v", "serve", "--midi-virtual"],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         found = []
         deadline = time.monotonic() + 120  # the bank may need building
@@ -186,8 +208,15 @@ def test_serve_opens_the_virtual_input(jack_env, tmp_path):
                 break
             time.sleep(0.5)
         assert found, "serve never opened the virtual MIDI input"
-        sender = subprocess.run([sys.executable, "-c", SENDER], input="cc 74 127\non 60 100\nsleep 0.2\noff 60\n",
-                                cwd=ROOT, env=jack_env, text=True, capture_output=True, timeout=60)
+        sender = subprocess.run(
+            [sys.executable, "-c", SENDER],
+            input="cc 74 127\non 60 100\nsleep 0.2\noff 60\n",
+            cwd=ROOT,
+            env=jack_env,
+            text=True,
+            capture_output=True,
+            timeout=60,
+        )
         assert sender.returncode == 0, sender.stderr
         assert serve.poll() is None, "serve exited after MIDI input"
     finally:

@@ -8,6 +8,7 @@ Skips with a clear message when oscsend/oscdump or JACK are missing, unless
 
 Run: ``scripts/with_jack.sh -- python -m pytest tests/e2e/test_osc_e2e.py -q -s``.
 """
+
 from __future__ import annotations
 
 import os
@@ -29,7 +30,6 @@ from tests.e2e.oscclient import free_udp_port
 from vibsynth.control.osc.codec import decode_packet, encode_bundle, encode_message, unix_to_ntp
 
 pytestmark = pytest.mark.e2e
-
 
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -69,20 +69,32 @@ def _socket_ready(port: int) -> bool:
     try:
         probe.request("/vibsynth/ping", 1, expect="/vibsynth/pong", timeout=0.5)
         return True
-    except (socket.timeout, ConnectionRefusedError):
+    except (TimeoutError, ConnectionRefusedError):
         return False
     finally:
         probe.close()
 
 
-def start_serve(tmp_path: Path, *, output: str = "null", extra_config: str = "", env: dict | None = None,
-                ready=_socket_ready):
+def start_serve(
+    tmp_path: Path, *, output: str = "null", extra_config: str = "", env: dict | None = None, ready=_socket_ready
+):
     """Start ``vibsynth serve``; return (process, port) once ``ready(port)`` (default: it answers /ping)."""
     port = free_udp_port()
     config = tmp_path / "vibsynth.yaml"
     config.write_text(f"version: 1\nosc:\n  port: {port}\n{extra_config}", encoding="utf-8")
-    cmd = [sys.executable, "-m", "vibsynth", "serve", "--config", str(config), "--output", output, "--no-midi",
-           "--osc-port", str(port)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "vibsynth",
+        "serve",
+        "--config",
+        str(config),
+        "--output",
+        output,
+        "--no-midi",
+        "--osc-port",
+        str(port),
+    ]
     proc_env = dict(os.environ if env is None else env, PYTHONPATH=str(ROOT))
     log = open(tmp_path / "serve.log", "w")
     proc = subprocess.Popen(cmd, cwd=ROOT, env=proc_env, stdout=log, stderr=subprocess.STDOUT)
@@ -110,8 +122,9 @@ class OscDump:
     """``oscdump -L PORT`` in the background; lines collected in a queue."""
 
     def __init__(self, port: int) -> None:
-        self.proc = subprocess.Popen(["oscdump", "-L", str(port)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                     text=True)
+        self.proc = subprocess.Popen(
+            ["oscdump", "-L", str(port)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
+        )
         self.lines: queue.Queue[str] = queue.Queue()
         threading.Thread(target=self._read, daemon=True).start()
 
@@ -138,8 +151,13 @@ class OscDump:
 
 
 def oscsend(port: int, address: str, types: str = "", *args: str) -> None:
-    subprocess.run(["oscsend", "127.0.0.1", str(port), address, types, *args] if types else
-                   ["oscsend", "127.0.0.1", str(port), address], check=True, timeout=10)
+    subprocess.run(
+        ["oscsend", "127.0.0.1", str(port), address, types, *args]
+        if types
+        else ["oscsend", "127.0.0.1", str(port), address],
+        check=True,
+        timeout=10,
+    )
 
 
 # ---------------------------------------------------------------------- null output: protocol
@@ -265,7 +283,7 @@ def test_timetagged_bundle_starts_on_time(jack_serve):
             cap.connect(portaudio_output_ports(cap.client)[:1])
             cap.arm()
             time.sleep(0.3)
-            for k in range(6):
+            for _k in range(6):
                 client.send("/vibsynth/intensity", 0.0)
                 time.sleep(0.2)
                 wall = time.time()
@@ -279,7 +297,7 @@ def test_timetagged_bundle_starts_on_time(jack_serve):
         offsets = []
         for frame_sent, _ in errors:
             expected = frame_sent - start + int(0.5 * rate)
-            onset = np.flatnonzero(np.abs(data[expected - int(0.1 * rate):expected + int(0.1 * rate)]) > 1e-7)
+            onset = np.flatnonzero(np.abs(data[expected - int(0.1 * rate) : expected + int(0.1 * rate)]) > 1e-7)
             assert onset.size, "no onset within 100 ms of the timetag"
             offsets.append((onset[0] - int(0.1 * rate)) / rate)
     finally:
@@ -296,8 +314,10 @@ def test_load_10k_messages_per_second(jack_serve):
         before = client.status()
         batch = 10  # a burst every millisecond
         period = batch / LOAD_RATE
-        messages = [encode_message(f"/vibsynth/ch/1/{'intensity' if k % 2 else 'balance'}",
-                                   ((k % 100) / 100.0,), "f") for k in range(200)]
+        messages = [
+            encode_message(f"/vibsynth/ch/1/{'intensity' if k % 2 else 'balance'}", ((k % 100) / 100.0,), "f")
+            for k in range(200)
+        ]
         sent = 0
         start = time.perf_counter()
         next_t = start
@@ -317,9 +337,11 @@ def test_load_10k_messages_per_second(jack_serve):
         client.close()
     received = after["packets"] - before["packets"] - 2  # minus the /sync and the second /status
     underflows = after["underflows"] - before["underflows"]
-    print(f"\nOSC load: sent {sent} in {elapsed:.1f} s ({sent / elapsed:.0f}/s), received {received} "
-          f"(lost {sent - received}), underflows {underflows}, errors {after['errors'] - before['errors']}, "
-          f"rcvbuf {after['rcvbuf']} B, render load {after['load']:.2f}")
+    print(
+        f"\nOSC load: sent {sent} in {elapsed:.1f} s ({sent / elapsed:.0f}/s), received {received} "
+        f"(lost {sent - received}), underflows {underflows}, errors {after['errors'] - before['errors']}, "
+        f"rcvbuf {after['rcvbuf']} B, render load {after['load']:.2f}"
+    )
     assert after["errors"] == before["errors"]
     assert received == sent, f"lost {sent - received} of {sent} messages"
     assert underflows <= MAX_UNDERFLOWS
@@ -369,8 +391,10 @@ def limits_serve(tmp_path_factory):
         except AssertionError:
             return False
 
-    extra = (f"  reply_port: {dump_port}\n  host: 0.0.0.0\n  allow: {allow!r}\n  tcp: true\n"
-             "  tcp_idle_timeout_s: 2\n  tcp_max_per_peer: 4\n")
+    extra = (
+        f"  reply_port: {dump_port}\n  host: 0.0.0.0\n  allow: {allow!r}\n  tcp: true\n"
+        "  tcp_idle_timeout_s: 2\n  tcp_max_per_peer: 4\n"
+    )
     env = dict(os.environ, VIBSYNTH_HOST_API="JACK", JACK_NO_AUDIO_RESERVATION="1")
     proc, port = start_serve(tmp, output="sounddevice", env=env, extra_config=extra, ready=ready)
     yield port, dump, host_ip
@@ -405,16 +429,19 @@ def test_pathological_patterns_do_not_freeze_serve(limits_serve):
     get_s = time.monotonic() - start
     after = _dump_status(port, dump)
     rate = float(after["rate"])
-    print(f"\npathological pattern -> error reply (incl. oscsend start-up): {', '.join(f'{1e3 * t:.0f} ms' for t in times)}; "
-          f"then /get {1e3 * get_s:.0f} ms; underflows {int(after['underflows']) - int(before['underflows'])}; "
-          f"stream advanced {(int(after['frame']) - int(before['frame'])) / rate:.2f} s")
+    print(
+        "\npathological pattern -> error reply (incl. oscsend start-up): "
+        f"{', '.join(f'{1e3 * t:.0f} ms' for t in times)}; "
+        f"then /get {1e3 * get_s:.0f} ms; underflows {int(after['underflows']) - int(before['underflows'])}; "
+        f"stream advanced {(int(after['frame']) - int(before['frame'])) / rate:.2f} s"
+    )
     assert max(times) < 2.0 and get_s < 2.0
-    assert int(after["frame"]) > int(before["frame"])          # the audio stream kept going
+    assert int(after["frame"]) > int(before["frame"])  # the audio stream kept going
     assert int(after["underflows"]) - int(before["underflows"]) <= MAX_UNDERFLOWS
 
 
 def test_cidr_allow_list_starts_serve(limits_serve):
-    port, dump, _ = limits_serve            # osc.allow held 127.0.0.0/8, ::1/128, 10.0.0.0/8: serve started
+    port, dump, _ = limits_serve  # osc.allow held 127.0.0.0/8, ::1/128, 10.0.0.0/8: serve started
     status = _dump_status(port, dump)
     assert int(status["denied"]) == 0
 
@@ -428,8 +455,8 @@ def test_error_replies_have_no_paths_and_off_host_replies_are_small(limits_serve
     if host_ip is None:
         unavailable("this machine has no non-loopback IPv4 address to act as a client on another host")
     _drain(dump)
-    oscsend_to(host_ip, port, "/vibsynth/status")                 # 24 bytes from a non-loopback address
-    line = dump.wait_for("/vibsynth/")                            # the first reply: no status.reply
+    oscsend_to(host_ip, port, "/vibsynth/status")  # 24 bytes from a non-loopback address
+    line = dump.wait_for("/vibsynth/")  # the first reply: no status.reply
     assert line.startswith('/vibsynth/error ss "/vibsynth/status" "reply of'), line
     address, message = line.split('"')[1], line.split('"')[3]
     assert len(encode_message("/vibsynth/error", (address, message), "ss")) <= 3 * 24
@@ -468,7 +495,7 @@ def _closed(conn: socket.socket, timeout: float) -> bool:
         return conn.recv(1) == b""
     except ConnectionResetError:
         return True
-    except socket.timeout:
+    except TimeoutError:
         return False
 
 
@@ -477,12 +504,12 @@ def test_stalled_tcp_clients_do_not_lock_out_others(limits_serve):
     stalled = [_tcp_connect(port, "127.0.0.1") for _ in range(10)]
     try:
         for conn in stalled[:4]:
-            conn.sendall(b"\xc0/vibsynth/pi")                      # frames that never end
-        assert all(_closed(conn, 3.0) for conn in stalled[4:])    # over 4 per address: refused
-        with _tcp_connect(port, "127.0.0.2") as other:              # another address is served
+            conn.sendall(b"\xc0/vibsynth/pi")  # frames that never end
+        assert all(_closed(conn, 3.0) for conn in stalled[4:])  # over 4 per address: refused
+        with _tcp_connect(port, "127.0.0.2") as other:  # another address is served
             assert _tcp_ping(other, 1)
-        assert all(_closed(conn, 6.0) for conn in stalled[:4])    # closed after the 2 s idle timeout
-        with _tcp_connect(port, "127.0.0.1") as again:              # and the same address is served again
+        assert all(_closed(conn, 6.0) for conn in stalled[:4])  # closed after the 2 s idle timeout
+        with _tcp_connect(port, "127.0.0.1") as again:  # and the same address is served again
             assert _tcp_ping(again, 2)
     finally:
         for conn in stalled:
@@ -527,8 +554,10 @@ def test_hundred_thousand_timetagged_bundles(jack_serve):
         client.close()
         flood.close()
     refused = during["schedule_full"] - before.get("schedule_full", 0)
-    print(f"\n100k bundles in {flood_s:.1f} s: pending {during['scheduled_pending']}, refused {refused}, "
-          f"underflows {loaded} during vs {baseline} in 3 s quiet")
+    print(
+        f"\n100k bundles in {flood_s:.1f} s: pending {during['scheduled_pending']}, refused {refused}, "
+        f"underflows {loaded} during vs {baseline} in 3 s quiet"
+    )
     assert during["scheduled_pending"] == 10_000
     bundles = during["scheduled"] - before["scheduled"]
     assert bundles == sent  # none lost in the socket

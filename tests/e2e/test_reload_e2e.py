@@ -9,10 +9,10 @@ reload must keep working beside it (a preset added afterwards is playable).
 
 Run: ``scripts/with_jack.sh -- python -m pytest tests/e2e/test_reload_e2e.py -q -s``.
 """
+
 from __future__ import annotations
 
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -41,10 +41,29 @@ def _start(tmp_path: Path, presets: Path) -> tuple[subprocess.Popen, int, Path]:
     config = tmp_path / "vibsynth.yaml"
     config.write_text(f"version: 1\nosc:\n  port: {port}\n", encoding="utf-8")
     log_path = tmp_path / "serve.log"
-    env = dict(os.environ, PYTHONPATH=str(ROOT), VIBSYNTH_HOST_API="JACK", JACK_NO_AUDIO_RESERVATION="1",
-               VIBSYNTH_PRESETS_DIR=str(presets), XDG_CONFIG_HOME=str(tmp_path / "xdg-config"))
-    cmd = [sys.executable, "-m", "vibsynth", "serve", "--config", str(config), "--output", "sounddevice",
-           "--no-midi", "--osc-port", str(port), "--intensity", "0.5"]
+    env = dict(
+        os.environ,
+        PYTHONPATH=str(ROOT),
+        VIBSYNTH_HOST_API="JACK",
+        JACK_NO_AUDIO_RESERVATION="1",
+        VIBSYNTH_PRESETS_DIR=str(presets),
+        XDG_CONFIG_HOME=str(tmp_path / "xdg-config"),
+    )
+    cmd = [
+        sys.executable,
+        "-m",
+        "vibsynth",
+        "serve",
+        "--config",
+        str(config),
+        "--output",
+        "sounddevice",
+        "--no-midi",
+        "--osc-port",
+        str(port),
+        "--intensity",
+        "0.5",
+    ]
     with open(log_path, "w") as log:
         proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
     deadline = time.monotonic() + START_TIMEOUT_S
@@ -59,7 +78,7 @@ def _start(tmp_path: Path, presets: Path) -> tuple[subprocess.Popen, int, Path]:
             try:
                 probe.request("/vibsynth/ping", 1, expect="/vibsynth/pong", timeout=0.5)
                 return proc, port, log_path
-            except (socket.timeout, ConnectionRefusedError):
+            except (TimeoutError, ConnectionRefusedError):
                 continue
     finally:
         probe.close()

@@ -1,4 +1,5 @@
 """Shared fixtures: a small bank (fast to build) over the default basis."""
+
 from __future__ import annotations
 
 import pytest

@@ -1,4 +1,5 @@
 """Noise bank: iso-intensity, shared phases, balance, seamless loop, decorrelation, cache, actuator EQ."""
+
 from __future__ import annotations
 
 import logging
@@ -114,8 +115,12 @@ def test_cache_roundtrip_and_corrupt_file(tmp_path, basis, caplog):
 def test_cache_key_covers_every_parameter(basis):
     base = BankSpec()
     variants = [
-        BankSpec(fs=44100.0), BankSpec(loop_seconds=2.0), BankSpec(levels=33), BankSpec(balance_max=3.0),
-        BankSpec(seed=2), BankSpec(actuator=ActuatorResponse.from_points([[100, 0], [300, 6]])),
+        BankSpec(fs=44100.0),
+        BankSpec(loop_seconds=2.0),
+        BankSpec(levels=33),
+        BankSpec(balance_max=3.0),
+        BankSpec(seed=2),
+        BankSpec(actuator=ActuatorResponse.from_points([[100, 0], [300, 6]])),
     ]
     keys = {str(base.key(basis))} | {str(v.key(basis)) for v in variants}
     assert len(keys) == len(variants) + 1

@@ -1,4 +1,5 @@
 """Engine: levels, glide, crossfade, limiter, mute, scheduling, block invariance, no allocation, threads."""
+
 from __future__ import annotations
 
 import threading
@@ -29,7 +30,9 @@ def test_silent_until_a_control_arrives(small_bank):
 def test_intensity_level_follows_knob(small_bank, knob, balance):
     e = make(small_bank, initial_intensity=knob, initial_balance=balance, ceiling_db=-40, range_db=40)
     x = e.render(small_bank.n_samples)[:, 0].astype(np.float64)
-    assert intensity_level_db(x, fs=e.fs) == pytest.approx(knob_to_level_db(knob, ceiling_db=-40, range_db=40), abs=0.05)
+    assert intensity_level_db(x, fs=e.fs) == pytest.approx(
+        knob_to_level_db(knob, ceiling_db=-40, range_db=40), abs=0.05
+    )
 
 
 def test_crossfade_is_linear_mix_of_adjacent_levels(small_bank):
@@ -110,8 +113,8 @@ def test_mute_reaches_silence_within_fade_and_unmute_restores(small_bank):
     y = e.render(6000)[:, 0]
     r = ref.render(6000)[:, 0]
     np.testing.assert_array_equal(y[:2000], r[:2000])
-    assert np.all(np.abs(y[2000:2000 + fade]) <= np.abs(r[2000:2000 + fade]))
-    assert not y[2000 + fade:].any()
+    assert np.all(np.abs(y[2000 : 2000 + fade]) <= np.abs(r[2000 : 2000 + fade]))
+    assert not y[2000 + fade :].any()
     e.submit(SetMute(False))
     y = e.render(fade + 500)[:, 0]
     assert y[fade:].any()
@@ -141,7 +144,9 @@ def test_limiter_never_exceeds_ceiling_property(small_bank):
             value = rng.uniform(0, 1) if name == "intensity" else rng.uniform(-3.5, 3.5)
             at = None if rng.random() < 0.5 else frame + int(rng.integers(0, 600))
             chans = None if rng.random() < 0.5 else (int(rng.integers(0, 2)),)
-            e.submit(SetKnob(name, float(value), channels=chans, at_frame=at, glide_s=float(rng.choice([0, 0.001, 0.02]))))
+            e.submit(
+                SetKnob(name, float(value), channels=chans, at_frame=at, glide_s=float(rng.choice([0, 0.001, 0.02])))
+            )
         n = int(rng.integers(1, 700))
         y = e.render(n)
         frame += n
@@ -159,7 +164,11 @@ def test_block_by_block_equals_one_shot(small_bank):
         for k in range(40):
             name = "intensity" if k % 2 else "balance"
             value = r.uniform(0, 1) if name == "intensity" else r.uniform(-3, 3)
-            out.append(SetKnob(name, float(value), at_frame=int(r.integers(0, 20000)), glide_s=float(r.choice([0, 0.003, 0.01]))))
+            out.append(
+                SetKnob(
+                    name, float(value), at_frame=int(r.integers(0, 20000)), glide_s=float(r.choice([0, 0.003, 0.01]))
+                )
+            )
         out.append(SetMute(True, channels=(1,), at_frame=12000))
         out.append(SetMute(False, channels=(1,), at_frame=15000))
         return out

@@ -1,4 +1,5 @@
 """Null and WAV outputs, device resolution, and the serve fallback logic (no sound card needed)."""
+
 from __future__ import annotations
 
 import logging
@@ -113,6 +114,7 @@ def test_compiled_callback_maps_channels_and_counts_underflows(small_bank):
 def no_portaudio(monkeypatch):
     def fail():
         raise DeviceError("PortAudio is not available (test)")
+
     monkeypatch.setattr(outputs, "import_sounddevice", fail)
 
 
@@ -158,11 +160,16 @@ def _has_osc() -> bool:
 class _FakeStream:
     """A PortAudio stream stand-in: while active, a thread calls the engine's callback every 5 ms."""
 
-    opened: list["_FakeStream"] = []
+    opened: list[_FakeStream] = []
     engine: Engine | None = None
 
     def __init__(self, kind="output", *, callback, finished_callback, userdata=None, **kwargs):
-        self.callback, self.userdata, self.finished_callback, self.kwargs = callback, userdata, finished_callback, kwargs
+        self.callback, self.userdata, self.finished_callback, self.kwargs = (
+            callback,
+            userdata,
+            finished_callback,
+            kwargs,
+        )
         self.active = False
         self.closed = False
         _FakeStream.opened.append(self)
@@ -200,6 +207,7 @@ def _fake_portaudio(sd):
 
     def terminate():
         sd._initialized -= 1
+
     sd._terminate = terminate
 
 

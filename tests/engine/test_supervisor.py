@@ -6,6 +6,7 @@ streams can die (JACK: inactive, no finished callback; ALSA: finished callback),
 hang in open / terminate. Time is driven explicitly: the supervisor runs on a fake
 clock and ``supervisor.step()`` is called by the tests (``restart=False``).
 """
+
 from __future__ import annotations
 
 import logging
@@ -94,7 +95,7 @@ class FakeLib:
 
 
 class FakeStream:
-    def __init__(self, sd: "FakeSd", kind="output", *, callback, userdata, finished_callback, **kwargs) -> None:
+    def __init__(self, sd: FakeSd, kind="output", *, callback, userdata, finished_callback, **kwargs) -> None:
         if sd.world.hang_open:
             sd.world.hang.wait()
         if sd.world.open_error:
@@ -193,14 +194,16 @@ def pump(out: SoundDeviceOutput, blocks: int = 3) -> None:
         out.engine._core.run_callback(buf, 0)
 
 
-def run_until(out: SoundDeviceOutput, clock: Clock, state: str, *, step: float = 0.05, limit: float = 30.0,
-              beat: bool = False) -> float:
+def run_until(
+    out: SoundDeviceOutput, clock: Clock, state: str, *, step: float = 0.05, limit: float = 30.0, beat: bool = False
+) -> float:
     """Step the supervisor on the fake clock until ``state``; returns the clock time it took."""
     start = clock()
     while out.supervisor.step() != state:
         if clock() - start > limit:
-            raise AssertionError(f"still {out.state!r} ({out.state_reason}) after {limit} s; "
-                                 f"last error {out.supervisor.last_error!r}")
+            raise AssertionError(
+                f"still {out.state!r} ({out.state_reason}) after {limit} s; last error {out.supervisor.last_error!r}"
+            )
         clock.advance(step)
         if beat and out.state == RECOVERING:
             pump(out)
@@ -409,8 +412,13 @@ def test_retries_wait_while_two_portaudio_calls_are_hung(small_bank, sd, world):
 
 
 def test_stop_while_a_retry_hangs_returns_in_bounded_time(small_bank, sd, world):
-    out = SoundDeviceOutput(Engine(small_bank, channels=1), host_api="JACK", block_size=64,
-                            heartbeat_timeout_s=0.2, backoff=Backoff(0.05, 0.1))
+    out = SoundDeviceOutput(
+        Engine(small_bank, channels=1),
+        host_api="JACK",
+        block_size=64,
+        heartbeat_timeout_s=0.2,
+        backoff=Backoff(0.05, 0.1),
+    )
     out.start()
     world.hang_open = True
     sd.streams[0].jack_server_died()
@@ -512,8 +520,13 @@ def test_status_line_and_osc_status_say_device_lost_with_the_reason(small_bank, 
 
 
 def test_supervisor_step_does_nothing_once_stopped():
-    host = types.SimpleNamespace(heartbeat=lambda: 0, stream_fault=lambda: "gone", drop_stream=lambda: None,
-                                 reopen=lambda: "x", housekeeping=lambda: None)
+    host = types.SimpleNamespace(
+        heartbeat=lambda: 0,
+        stream_fault=lambda: "gone",
+        drop_stream=lambda: None,
+        reopen=lambda: "x",
+        housekeeping=lambda: None,
+    )
     clock = Clock()
     sup = StreamSupervisor(host, clock=clock)
     assert sup.step() == STOPPED

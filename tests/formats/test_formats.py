@@ -1,4 +1,5 @@
 """Reading recordings and PSD tables, writing WAV and basis files."""
+
 from __future__ import annotations
 
 import gzip
@@ -74,8 +75,13 @@ def test_basis_yaml_round_trip_and_errors(tmp_path, basis):
 
 # --------------------------------------------------------------------------- the one YAML loader (issue 12)
 #: The issue's "billion laughs": 9 levels of 9 aliases each, 9**9 = 387 million strings once expanded.
-BOMB = "\n".join(["a: &a [x,x,x,x,x,x,x,x,x]"] + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]"
-                                                    for a, b in zip("abcdefgh", "bcdefghi")]) + "\n"
+BOMB = (
+    "\n".join(
+        ["a: &a [x,x,x,x,x,x,x,x,x]"]
+        + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]" for a, b in zip("abcdefgh", "bcdefghi")]
+    )
+    + "\n"
+)
 #: The same shape written out without aliases: the cost of reading an ordinary file this size.
 PLAIN = "\n".join(["a: [x,x,x,x,x,x,x,x,x]"] + [f"{b}: [" + ",".join(["xy"] * 9) + "]" for b in "bcdefghi"]) + "\n"
 
@@ -106,22 +112,31 @@ def test_bomb_is_refused_fast_with_bounded_memory(tmp_path):
     assert len(BOMB) < 400 and abs(len(PLAIN) - len(BOMB)) < 60
     plain_s, plain_peak, plain_exc = measure(lambda: load_yaml(tmp_path / "plain.yaml"))
     bomb_s, bomb_peak, bomb_exc = measure(lambda: load_yaml(tmp_path / "bomb.yaml"))
-    print(f"\nbomb refused in {1e3 * bomb_s:.2f} ms, peak {bomb_peak / 1024:.0f} KiB "
-          f"(plain file of the same size read in {1e3 * plain_s:.2f} ms, peak {plain_peak / 1024:.0f} KiB)")
+    print(
+        f"\nbomb refused in {1e3 * bomb_s:.2f} ms, peak {bomb_peak / 1024:.0f} KiB "
+        f"(plain file of the same size read in {1e3 * plain_s:.2f} ms, peak {plain_peak / 1024:.0f} KiB)"
+    )
     assert plain_exc is None
     assert isinstance(bomb_exc, InputError)
-    assert str(bomb_exc).startswith(f"{tmp_path / 'bomb.yaml'}:2:8: YAML alias '*a' (anchor '&a' on line 1): "
-                                    "aliases are not allowed in a YAML file")
+    assert str(bomb_exc).startswith(
+        f"{tmp_path / 'bomb.yaml'}:2:8: YAML alias '*a' (anchor '&a' on line 1): aliases are not allowed in a YAML file"
+    )
     assert bomb_peak <= 2 * plain_peak  # refused before any expansion: no more than reading a plain file
     assert bomb_s < 0.2
 
 
-@pytest.mark.parametrize("text, message", [
-    ("[" * 10_000 + "]" * 10_000, "x.yaml:1:65: nested more than 64 levels deep (not allowed in a YAML file)"),
-    ("".join(f"{' ' * i}k{i}:\n" for i in range(1_000)),
-     "x.yaml:64:64: nested more than 64 levels deep (not allowed in a YAML file)"),
-    ("- " * 10_000 + "x\n", "x.yaml:1:129: nested more than 64 levels deep (not allowed in a YAML file)"),
-], ids=["flow lists", "block mappings", "block lists"])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("[" * 10_000 + "]" * 10_000, "x.yaml:1:65: nested more than 64 levels deep (not allowed in a YAML file)"),
+        (
+            "".join(f"{' ' * i}k{i}:\n" for i in range(1_000)),
+            "x.yaml:64:64: nested more than 64 levels deep (not allowed in a YAML file)",
+        ),
+        ("- " * 10_000 + "x\n", "x.yaml:1:129: nested more than 64 levels deep (not allowed in a YAML file)"),
+    ],
+    ids=["flow lists", "block mappings", "block lists"],
+)
 def test_deep_nesting_is_a_clear_error_not_a_recursion_error(text, message):
     from vibsynth.formats.yamlio import load_yaml
 
@@ -212,7 +227,10 @@ def test_new_file_mode_follows_the_umask_and_replaced_file_keeps_its_mode(tmp_pa
         assert stat.S_IMODE((tmp_path / "a.txt").stat().st_mode) == 0o640
     finally:
         os.umask(old)
-    assert (tmp_path / "a.txt").read_text() == "three" and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]
+    assert (tmp_path / "a.txt").read_text() == "three" and sorted(p.name for p in tmp_path.iterdir()) == [
+        "a.txt",
+        "b.txt",
+    ]
 
 
 def test_atomic_write_fsyncs_file_and_folder_and_writes_through_links(tmp_path, monkeypatch):
@@ -303,9 +321,13 @@ def _writer_process(tmp_path, target, a: bytes, b: bytes, mode: str):
     (tmp_path / "a.bin").write_bytes(a)
     (tmp_path / "b.bin").write_bytes(b)
     root = Path(__file__).resolve().parents[2]
-    return subprocess.Popen([sys.executable, "-c", _KILL_SCRIPT, str(target), mode, str(tmp_path / "a.bin"),
-                             str(tmp_path / "b.bin")], stdout=subprocess.PIPE, text=True, cwd=root,
-                            env={**__import__("os").environ, "PYTHONPATH": str(root)})
+    return subprocess.Popen(
+        [sys.executable, "-c", _KILL_SCRIPT, str(target), mode, str(tmp_path / "a.bin"), str(tmp_path / "b.bin")],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=root,
+        env={**__import__("os").environ, "PYTHONPATH": str(root)},
+    )
 
 
 def test_kill_9_mid_write_leaves_the_old_file_and_the_temp_is_ignored(tmp_path, rng):

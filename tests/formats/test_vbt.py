@@ -1,4 +1,5 @@
 """The .vbt format: round trip, size, engine decoding, and fuzzing (truncation, byte flips, versions)."""
+
 from __future__ import annotations
 
 import struct
@@ -47,7 +48,11 @@ def test_round_trip_is_exact_after_quantisation(stationary, step):
         ref = q.quantize(traj)
         assert np.array_equal(dec.trajectory.level_db, ref.level_db) and np.array_equal(dec.trajectory.t1, ref.t1)
         assert (dec.trajectory.fs, dec.trajectory.n_samples, dec.trajectory.window, dec.trajectory.hop) == (
-            traj.fs, traj.n_samples, traj.window, traj.hop)
+            traj.fs,
+            traj.n_samples,
+            traj.window,
+            traj.hop,
+        )
         assert dec.trajectory.basis_id == traj.basis_id
 
 
@@ -84,7 +89,9 @@ def test_step_decodes_with_the_step_in_the_right_window(basis, step, engine_over
     from vibsynth.dsp.intensity import intensity_frames_db
 
     x, traj, q = step
-    out = vbt_render.render(vbt.decode_bytes(vbt.encode_bytes(traj, q)).trajectory, basis=basis, overrides=engine_overrides)
+    out = vbt_render.render(
+        vbt.decode_bytes(vbt.encode_bytes(traj, q)).trajectory, basis=basis, overrides=engine_overrides
+    )
     a = intensity_frames_db(x, fs=FS)
     b = intensity_frames_db(out.signal, fs=FS) + out.offset_db
     mid = (-45.0 + -35.0) / 2

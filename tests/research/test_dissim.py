@@ -1,4 +1,5 @@
 """Research tools: ratings reader, the paper's Lasso fit on simulated ratings, MDS map, missing sklearn."""
+
 from __future__ import annotations
 
 import builtins
@@ -92,8 +93,16 @@ def write_ratings(tmp_path, rows, header="file_a,file_b,rating"):
 
 
 def test_read_ratings_averages_repeated_pairs(tmp_path):
-    path = write_ratings(tmp_path, [("a.wav", "b.wav", 0.2), ("b.wav", "a.wav", 0.4), ("a.wav", "c.wav", 0.9),
-                                    ("b.wav", "c.wav", 0.5), ("a.wav", "a.wav", 0.1)])
+    path = write_ratings(
+        tmp_path,
+        [
+            ("a.wav", "b.wav", 0.2),
+            ("b.wav", "a.wav", 0.4),
+            ("a.wav", "c.wav", 0.9),
+            ("b.wav", "c.wav", 0.5),
+            ("a.wav", "a.wav", 0.1),
+        ],
+    )
     t = read_ratings(path)
     assert t.names == ["a", "b", "c"] and t.n_rows == 5
     lookup = {tuple(p): (r, c) for p, r, c in zip(t.pairs.tolist(), t.ratings, t.counts)}

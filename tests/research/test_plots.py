@@ -1,4 +1,5 @@
 """Each plot renders a non-trivial PNG (size, non-uniform pixels)."""
+
 from __future__ import annotations
 
 import builtins
@@ -44,8 +45,10 @@ def test_mds_plot(tmp_path, rng):
     for k in range(n):
         (tmp_path / f"s{k}.wav").write_bytes(b"")
     i, j = np.triu_indices(n)
-    rows = [f"s{a}.wav,s{b}.wav,{0.1 + 0.01 * abs(scores[a, 0] - scores[b, 0]) + rng.normal(0, 0.02):.4f}"
-            for a, b in zip(i, j)]
+    rows = [
+        f"s{a}.wav,s{b}.wav,{0.1 + 0.01 * abs(scores[a, 0] - scores[b, 0]) + rng.normal(0, 0.02):.4f}"
+        for a, b in zip(i, j)
+    ]
     (tmp_path / "r.csv").write_text("file_a,file_b,rating\n" + "\n".join(rows) + "\n")
     table = read_ratings(tmp_path / "r.csv")
     order = [int(f.stem[1:]) for f in table.files]

@@ -1,4 +1,5 @@
 """Config: schema errors (file, line, key, value, range), layering precedence, env vars, actuator profiles."""
+
 from __future__ import annotations
 
 import re
@@ -78,13 +79,14 @@ def test_default_sources_name_the_package_file_and_line():
         ("audio:\n  rate: 44100.5\n", ["{path}:2:", "audio.rate = 44100.5", "must be an integer"]),
         ("audio:\n  rate: fast\n", ["{path}:2:", "audio.rate = 'fast'", "must be an integer"]),
         ("audio:\n  rate: .nan\n", ["{path}:2:", "must be finite"]),
-        ("audio:\n  backend: jack\n", ["{path}:2:", "audio.backend = 'jack'",
-                                       "one of auto, sounddevice, null, wav"]),
+        ("audio:\n  backend: jack\n", ["{path}:2:", "audio.backend = 'jack'", "one of auto, sounddevice, null, wav"]),
         ("audio:\n  latency: medium\n", ["{path}:2:", "audio.latency = 'medium'", "one of low, high"]),
         ("audio:\n  latency: 5\n", ["{path}:2:", "outside the allowed range (0, 2] s"]),
         ("audio:\n  device: -1\n", ["{path}:2:", "audio.device = -1"]),
-        ("audio:\n  channelz: 2\n", ["{path}:2:", "unknown key 'audio.channelz'", "did you mean audio.channels",
-                                     "allowed in audio:"]),
+        (
+            "audio:\n  channelz: 2\n",
+            ["{path}:2:", "unknown key 'audio.channelz'", "did you mean audio.channels", "allowed in audio:"],
+        ),
         ("audioo:\n  rate: 48000\n", ["{path}:2:", "unknown key 'audioo.rate'"]),
         ("\n\nbank:\n  levels: 1\n", ["{path}:4:", "bank.levels = 1", "[2, 1001]"]),
         ("knobs:\n  limiter_ceiling: 0\n", ["{path}:2:", "outside the allowed range (0, 1]"]),
@@ -95,8 +97,10 @@ def test_default_sources_name_the_package_file_and_line():
         ("osc:\n  allow: [somewhere]\n", ["{path}:2:", "item 0 ('somewhere') is not an IP address"]),
         ("midi:\n  mode: toggle\n", ["{path}:2:", "midi.mode = 'toggle'", "one of gate, continuous"]),
         ("midi:\n  channel_map: {17: all}\n", ["{path}:2:", "key 17 is not a MIDI channel 1..16"]),
-        ("midi:\n  mapping:\n    intensity: [{cc: 200}]\n", ["{path}:3:", "midi.mapping.intensity",
-                                                             "cc 200 is outside [0, 127]"]),
+        (
+            "midi:\n  mapping:\n    intensity: [{cc: 200}]\n",
+            ["{path}:3:", "midi.mapping.intensity", "cc 200 is outside [0, 127]"],
+        ),
         ("midi:\n  mapping:\n    volume: [{cc: 7}]\n", ["{path}:3:", "unknown key 'midi.mapping.volume'"]),
         ("actuator:\n  response: [[0, 1]]\n", ["{path}:2:", "Hz 0 is outside (0, inf)"]),
         ("actuator:\n  response: [[100, 0], [50, 0]]\n", ["{path}:2:", "does not increase"]),
@@ -149,9 +153,14 @@ def test_empty_file_and_empty_section_are_fine(tmp_path):
 
 
 def test_valid_user_file_round_trip(tmp_path):
-    config = check_config_file(write(tmp_path, "audio:\n  channels: 2\n  channel_map: [3, 4]\n"
-                                               "midi:\n  channel_map: {1: all, 2: [2]}\n"
-                                               "osc:\n  allow: ['10.0.0.0/8', '127.0.0.1']\n"))
+    config = check_config_file(
+        write(
+            tmp_path,
+            "audio:\n  channels: 2\n  channel_map: [3, 4]\n"
+            "midi:\n  channel_map: {1: all, 2: [2]}\n"
+            "osc:\n  allow: ['10.0.0.0/8', '127.0.0.1']\n",
+        )
+    )
     assert config.get("audio.channel_map") == [3, 4]
     assert config.get("midi.channel_map") == {1: "all", 2: [2]}
 
@@ -259,8 +268,9 @@ def test_actuator_profiles_resolve():
 
 
 def test_explicit_response_wins_over_profile():
-    config = load_config(overrides={"actuator.profile": "hapcoil-example", "actuator.response": [[100, -3.0]]},
-                         user_file=False, env={})
+    config = load_config(
+        overrides={"actuator.profile": "hapcoil-example", "actuator.response": [[100, -3.0]]}, user_file=False, env={}
+    )
     assert resolve_actuator_response(config) == [(100.0, -3.0)]
 
 
@@ -293,8 +303,10 @@ def test_midi_nrpn_and_range_bindings_are_accepted_and_checked(tmp_path):
     from vibsynth.settings.config import load_config
 
     good = tmp_path / "good.yaml"
-    good.write_text("midi:\n  mapping:\n    balance: [{nrpn: [1, 1], range: [-1.0, 1.0]}, {cc: 74}]\n"
-                    "  nrpn: {intensity: [2, 0], balance: 300}\n  cc_glide_max_ms: 50\n")
+    good.write_text(
+        "midi:\n  mapping:\n    balance: [{nrpn: [1, 1], range: [-1.0, 1.0]}, {cc: 74}]\n"
+        "  nrpn: {intensity: [2, 0], balance: 300}\n  cc_glide_max_ms: 50\n"
+    )
     cfg = load_config(good)
     assert cfg.data["midi"]["mapping"]["balance"][0] == {"nrpn": [1, 1], "range": [-1.0, 1.0]}
     for text, needle in [
@@ -310,8 +322,13 @@ def test_midi_nrpn_and_range_bindings_are_accepted_and_checked(tmp_path):
 
 
 # --------------------------------------------------------------------------- the one YAML loader (issue 12)
-BOMB = "\n".join(["a: &a [x,x,x,x,x,x,x,x,x]"] + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]"
-                                                    for a, b in zip("abcdefgh", "bcdefghi")]) + "\n"
+BOMB = (
+    "\n".join(
+        ["a: &a [x,x,x,x,x,x,x,x,x]"]
+        + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]" for a, b in zip("abcdefgh", "bcdefghi")]
+    )
+    + "\n"
+)
 
 
 def test_config_bomb_is_refused_fast_naming_file_and_line(tmp_path):
@@ -322,8 +339,9 @@ def test_config_bomb_is_refused_fast_naming_file_and_line(tmp_path):
     with pytest.raises(ConfigError) as info:
         check_config_file(path)
     assert time.perf_counter() - started < 0.5
-    assert str(info.value).startswith(f"{path}:4:8: YAML alias '*a' (anchor '&a' on line 3): aliases are not "
-                                      "allowed in a config file")
+    assert str(info.value).startswith(
+        f"{path}:4:8: YAML alias '*a' (anchor '&a' on line 3): aliases are not allowed in a config file"
+    )
 
 
 def test_config_merge_key_needs_an_alias_and_is_refused(tmp_path):
@@ -334,8 +352,11 @@ def test_config_merge_key_needs_an_alias_and_is_refused(tmp_path):
 
 def test_oversized_and_deep_config_files(tmp_path):
     big = write(tmp_path, "audio:\n  rate: 48000\n" + "#" * (2 << 20) + "\n", "big.yaml")
-    with pytest.raises(ConfigError, match=r"big.yaml: 2,097,174 bytes, over the 1 MiB limit for a config file; "
-                                           r"not read$"):
+    with pytest.raises(
+        ConfigError,
+        match=r"big.yaml: 2,097,174 bytes, over the 1 MiB limit for a config file; "
+        r"not read$",
+    ):
         check_config_file(big)
     deep = write(tmp_path, "audio: " + "[" * 10_000 + "]" * 10_000 + "\n", "deep.yaml")
     with pytest.raises(ConfigError, match=r"deep.yaml:1:71: nested more than 64 levels deep"):
@@ -349,8 +370,10 @@ def test_environment_and_command_line_values_go_through_the_same_loader():
         parse_override("osc.allow=[&x '1.2.3.4', *x]")
     # text that is not YAML stays a plain string, as before
     assert parse_override("audio.device=[Scarlett") == ("audio.device", "[Scarlett")
-    assert load_config(env={"VIBSYNTH_DEVICE": "Scarlett: 2i2 [USB"}, user_file=False).get("audio.device") \
+    assert (
+        load_config(env={"VIBSYNTH_DEVICE": "Scarlett: 2i2 [USB"}, user_file=False).get("audio.device")
         == "Scarlett: 2i2 [USB"
+    )
 
 
 def test_long_values_are_shortened_in_messages(tmp_path):

@@ -1,4 +1,5 @@
 """Presets: schema errors, migration, library layering, atomic writes, hot reload, shipped set, round trip."""
+
 from __future__ import annotations
 
 import importlib.util
@@ -28,8 +29,10 @@ from vibsynth.settings.presets import (
 from vibsynth.settings.reload import PresetWatcher
 
 ROOT = Path(__file__).resolve().parents[2]
-GOOD = "version: 1\nname: x\ndescription: test\nintensity: 0.5\nbalance: -0.25\nglide_ms: 30\nprogram: 5\n" \
-       "tags: [a, b]\nprovenance: {recording: r.wav}\n"
+GOOD = (
+    "version: 1\nname: x\ndescription: test\nintensity: 0.5\nbalance: -0.25\nglide_ms: 30\nprogram: 5\n"
+    "tags: [a, b]\nprovenance: {recording: r.wav}\n"
+)
 
 
 def parse(text: str) -> Preset:
@@ -48,13 +51,19 @@ def test_good_preset_parses():
     [
         ("intensity: 1.5\nbalance: 0\n", "x.yaml:1: intensity = 1.5: outside the allowed range [0, 1]"),
         ("intensity: -0.1\nbalance: 0\n", "x.yaml:1: intensity = -0.1: outside the allowed range [0, 1]"),
-        ("intensity: loud\nbalance: 0\n", "x.yaml:1: intensity = 'loud': must be a number (allowed: a number in [0, 1])"),
+        (
+            "intensity: loud\nbalance: 0\n",
+            "x.yaml:1: intensity = 'loud': must be a number (allowed: a number in [0, 1])",
+        ),
         ("intensity: true\nbalance: 0\n", "x.yaml:1: intensity = true: must be a number"),
         ("intensity: .nan\nbalance: 0\n", "x.yaml:1: intensity = nan: must be finite"),
         ("intensity: 0.5\nbalance: 4.5\n", "x.yaml:2: balance = 4.5: outside the allowed range [-4, 4] (knob units)"),
         ("intensity: 0.5\nbalance: .inf\n", "x.yaml:2: balance = inf: must be finite"),
         ("intensity: 0.5\nbalance: [1]\n", "x.yaml:2: balance = [1]: must be a number"),
-        ("intensity: 0.5\nbalance: 0\nglide_ms: -1\n", "x.yaml:3: glide_ms = -1: outside the allowed range [0, 10000] ms"),
+        (
+            "intensity: 0.5\nbalance: 0\nglide_ms: -1\n",
+            "x.yaml:3: glide_ms = -1: outside the allowed range [0, 10000] ms",
+        ),
         ("intensity: 0.5\nbalance: 0\nprogram: 128\n", "x.yaml:3: program = 128: outside the allowed range [0, 127]"),
         ("intensity: 0.5\nbalance: 0\nprogram: 1.5\n", "x.yaml:3: program = 1.5: must be an integer"),
         ("intensity: 0.5\nbalance: 0\ntags: rough\n", "x.yaml:3: tags = 'rough': must be a list, e.g. tags: [rough]"),
@@ -91,13 +100,16 @@ def test_bad_name_is_refused():
 def test_random_valid_presets_round_trip_through_yaml(seed, tmp_path):
     rng = np.random.default_rng(seed)
     for i in range(20):
-        p = Preset(name=f"p{i}", intensity=float(rng.uniform(0, 1)),
-                   balance=float(rng.uniform(-BALANCE_LIMIT, BALANCE_LIMIT)),
-                   glide_ms=None if rng.random() < 0.3 else float(rng.uniform(0, 10000)),
-                   program=None if rng.random() < 0.5 else int(rng.integers(0, 128)),
-                   tags=tuple(f"t{j}" for j in range(int(rng.integers(0, 4)))),
-                   description="d" * int(rng.integers(0, 50)),
-                   provenance={"n": int(rng.integers(0, 9)), "x": [1.5, "a"]})
+        p = Preset(
+            name=f"p{i}",
+            intensity=float(rng.uniform(0, 1)),
+            balance=float(rng.uniform(-BALANCE_LIMIT, BALANCE_LIMIT)),
+            glide_ms=None if rng.random() < 0.3 else float(rng.uniform(0, 10000)),
+            program=None if rng.random() < 0.5 else int(rng.integers(0, 128)),
+            tags=tuple(f"t{j}" for j in range(int(rng.integers(0, 4)))),
+            description="d" * int(rng.integers(0, 50)),
+            provenance={"n": int(rng.integers(0, 9)), "x": [1.5, "a"]},
+        )
         path = save_preset(p, tmp_path / f"p{i}.yaml")
         assert load_preset(path) == p
 
@@ -440,7 +452,8 @@ def test_file_over_the_cap_is_never_read_and_logged_once(dirs, monkeypatch, capl
                     fh.write(junk_text(rng, 4096))
     assert big not in reads
     assert lines_about(caplog, "big.yaml") == [
-        f"{big}: {vp.MAX_PRESET_BYTES + 1:,} bytes, over the 1 MiB limit for a preset; not read; skipped"]
+        f"{big}: {vp.MAX_PRESET_BYTES + 1:,} bytes, over the 1 MiB limit for a preset; not read; skipped"
+    ]
     assert "over the 1 MiB limit" in lib.errors[str(big)] and lib.names() == ["alpha", "beta", "gamma"]
 
     # it becomes a preset: read and added; too large again: one new line, last good version kept
@@ -521,7 +534,8 @@ def test_unlistable_folder_is_reported_once_and_its_presets_kept(dirs, monkeypat
     assert lines_about(caplog, "preset folder") == [
         f"preset folder {user}: cannot list it (Permission denied); keeping the presets read from it before "
         "until it can be listed again",
-        f"preset folder {user}: can be listed again"]
+        f"preset folder {user}: can be listed again",
+    ]
     assert {"mine", "other"} <= set(lib.names())
 
 
@@ -540,7 +554,8 @@ def test_symlink_loops_are_reported_once(tmp_path, caplog):
     assert looped.names() == ["ok"]
     assert lines_about(caplog, str(loop)) == [
         f"preset folder {loop}: cannot list it (symbolic link loop); keeping the presets read from it before "
-        "until it can be listed again"]
+        "until it can be listed again"
+    ]
     assert lines_about(caplog, "self.yaml") == [f"{folder / 'self.yaml'}: cannot read (symbolic link loop); skipped"]
 
 
@@ -589,12 +604,18 @@ def test_bomb_preset_is_refused_fast_and_named(dirs):
     started = time.perf_counter()
     lib = PresetLibrary(shipped, user)
     assert time.perf_counter() - started < 0.5
-    assert lib.errors[str(bomb)].startswith(f"{bomb}:2:8: YAML alias '*a' (anchor '&a' on line 1): aliases are not "
-                                            "allowed in a preset")
+    assert lib.errors[str(bomb)].startswith(
+        f"{bomb}:2:8: YAML alias '*a' (anchor '&a' on line 1): aliases are not allowed in a preset"
+    )
 
 
-BOMB = "\n".join(["a: &a [x,x,x,x,x,x,x,x,x]"] + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]"
-                                                    for a, b in zip("abcdefgh", "bcdefghi")]) + "\n"
+BOMB = (
+    "\n".join(
+        ["a: &a [x,x,x,x,x,x,x,x,x]"]
+        + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]" for a, b in zip("abcdefgh", "bcdefghi")]
+    )
+    + "\n"
+)
 
 
 # --------------------------------------------------------------------------- shipped presets
@@ -614,7 +635,9 @@ def test_shipped_presets_are_valid_and_span_the_balance_range():
         if prov["noise_floor_caveat"]:
             assert "noise floor" in p.description
     assert sorted(p.program for p in presets) == list(range(len(presets)))
-    assert [p.name for p in sorted(presets, key=lambda p: p.program)] == [p.name for p in sorted(presets, key=lambda p: p.balance)]
+    assert [p.name for p in sorted(presets, key=lambda p: p.program)] == [
+        p.name for p in sorted(presets, key=lambda p: p.balance)
+    ]
 
 
 def test_repo_presets_folder_is_the_package_data():
@@ -641,6 +664,15 @@ def test_shipped_presets_regenerate_identically(hatt_psd):
 # --------------------------------------------------------------------------- round trip
 def test_preset_yaml_has_schema_key_order():
     text = preset_to_yaml(parse(GOOD))
-    keys = [line.split(":")[0] for line in text.splitlines() if line and not line[0] in " #-"]
-    assert keys == ["version", "name", "description", "intensity", "balance", "glide_ms", "program", "tags",
-                    "provenance"]
+    keys = [line.split(":")[0] for line in text.splitlines() if line and line[0] not in " #-"]
+    assert keys == [
+        "version",
+        "name",
+        "description",
+        "intensity",
+        "balance",
+        "glide_ms",
+        "program",
+        "tags",
+        "provenance",
+    ]

@@ -1,5 +1,5 @@
-"""Rendering a MIDI file offline through the engine.
-"""
+"""Rendering a MIDI file offline through the engine."""
+
 from __future__ import annotations
 
 import os
@@ -17,11 +17,21 @@ def _knob_limits(data: dict[str, Any]) -> Any:
     from vibsynth.control.controller import KnobLimits
 
     knobs = data.get("knobs") or {}
-    return KnobLimits(balance_min=float(knobs.get("balance_min", -3.5)), balance_max=float(knobs.get("balance_max", 3.5)))
+    return KnobLimits(
+        balance_min=float(knobs.get("balance_min", -3.5)), balance_max=float(knobs.get("balance_max", 3.5))
+    )
 
 
-def render_midi_file(path: str | os.PathLike[str], *, config: Any, basis: Any = None, seconds: float | None = None,
-                     presets: Any = None, block: int = 1024, engine: Any = None) -> tuple[Any, float]:
+def render_midi_file(
+    path: str | os.PathLike[str],
+    *,
+    config: Any,
+    basis: Any = None,
+    seconds: float | None = None,
+    presets: Any = None,
+    block: int = 1024,
+    engine: Any = None,
+) -> tuple[Any, float]:
     """Render a MIDI file (CC automation and notes) offline through the live mapping.
 
     Every message is applied at its exact sample (``at_frame``), so the result
@@ -69,9 +79,12 @@ def render_midi_file(path: str | os.PathLike[str], *, config: Any, basis: Any = 
 
         engine = build_engine(config, basis=basis)
     knobs = data.get("knobs") or {}
-    controller = Controller(engine, limits=_knob_limits(data),
-                            initial_glide_s=float(knobs.get("glide_ms", 20.0)) / 1000.0,
-                            preset_resolver=getattr(presets, "get", None))
+    controller = Controller(
+        engine,
+        limits=_knob_limits(data),
+        initial_glide_s=float(knobs.get("glide_ms", 20.0)) / 1000.0,
+        preset_resolver=getattr(presets, "get", None),
+    )
     settings = MidiSettings.from_config(data, engine.channels)
     mapper = MidiMapper(controller, settings, presets=presets, source="midi-file")
     fs = float(engine.fs)
@@ -94,6 +107,6 @@ def render_midi_file(path: str | os.PathLike[str], *, config: Any, basis: Any = 
         while i < len(events) and events[i][0] < pos + n:
             mapper.handle(events[i][1], at_frame=max(events[i][0], pos))
             i += 1
-        out[pos:pos + n] = engine.render(n)
+        out[pos : pos + n] = engine.render(n)
         pos += n
     return out, fs

@@ -13,6 +13,7 @@ with back-off while OSC/MIDI keep working, and ``/status``, the console status l
 and the log say ``device lost`` with the reason. SIGTERM/SIGINT exit with code 0
 within :data:`EXIT_DEADLINE_S` in every state (see :class:`~vibsynth.engine.supervisor.ExitGuard`).
 """
+
 from __future__ import annotations
 
 import logging
@@ -20,7 +21,8 @@ import signal
 import sys
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from vibsynth.control import adapter_modules
 from vibsynth.control.controller import Controller, KnobLimits
@@ -83,23 +85,37 @@ def build_engine(
     audio, bank_cfg, knobs = config.data["audio"], config.data["bank"], config.data["knobs"]
     try:
         spec = BankSpec(
-            fs=float(audio["rate"]), loop_seconds=float(bank_cfg["loop_seconds"]),
-            balance_min=float(bank_cfg["balance_min"]), balance_max=float(bank_cfg["balance_max"]),
-            levels=int(bank_cfg["levels"]), seed=int(bank_cfg["seed"]), actuator=actuator_from_config(config),
+            fs=float(audio["rate"]),
+            loop_seconds=float(bank_cfg["loop_seconds"]),
+            balance_min=float(bank_cfg["balance_min"]),
+            balance_max=float(bank_cfg["balance_max"]),
+            levels=int(bank_cfg["levels"]),
+            seed=int(bank_cfg["seed"]),
+            actuator=actuator_from_config(config),
         )
     except (ParameterError, TypeError, ValueError) as exc:
         raise ConfigError(f"bank/audio settings: {exc}") from None
     cache_dir = bank_cfg.get("cache_dir")
     started = time.perf_counter()
     bank, origin = load_or_build(basis, spec, cache_dir=cache_dir, progress=progress)
-    log.info("noise bank %s in %.2f s (%d levels x %.1f s at %g Hz)", origin, time.perf_counter() - started,
-             bank.levels, bank.n_samples / bank.fs, bank.fs)
+    log.info(
+        "noise bank %s in %.2f s (%d levels x %.1f s at %g Hz)",
+        origin,
+        time.perf_counter() - started,
+        bank.levels,
+        bank.n_samples / bank.fs,
+        bank.fs,
+    )
     block = int(audio.get("block_size") or 0)
     try:
         return Engine(
-            bank, channels=int(audio["channels"]), ceiling_db=float(knobs["ceiling_db"]),
-            range_db=float(knobs["range_db"]), glide_s=float(knobs["glide_ms"]) / 1000.0,
-            mute_fade_s=float(knobs["mute_fade_ms"]) / 1000.0, limiter_ceiling=float(knobs["limiter_ceiling"]),
+            bank,
+            channels=int(audio["channels"]),
+            ceiling_db=float(knobs["ceiling_db"]),
+            range_db=float(knobs["range_db"]),
+            glide_s=float(knobs["glide_ms"]) / 1000.0,
+            mute_fade_s=float(knobs["mute_fade_ms"]) / 1000.0,
+            limiter_ceiling=float(knobs["limiter_ceiling"]),
             initial_intensity=float(knobs.get("initial_intensity", 0.0)),
             initial_balance=float(knobs.get("initial_balance", 0.0)),
             schedule_capacity=int(knobs.get("schedule_capacity", DEFAULT_SCHEDULE_CAPACITY)),
@@ -147,8 +163,12 @@ def open_output(
     if backend not in ("auto", "sounddevice"):
         raise ConfigError(f"audio.backend must be auto, sounddevice, null or wav, got {backend!r}")
     output = SoundDeviceOutput(
-        engine, device=audio.get("device"), host_api=audio.get("host_api"), block_size=block,
-        latency=_latency(audio.get("latency", "low")), channel_map=audio.get("channel_map"),
+        engine,
+        device=audio.get("device"),
+        host_api=audio.get("host_api"),
+        block_size=block,
+        latency=_latency(audio.get("latency", "low")),
+        channel_map=audio.get("channel_map"),
     )
     try:
         output.open()
@@ -173,8 +193,10 @@ def status_line(engine: Engine, output: OutputBackend) -> str:
     for c, (k, b, muted) in enumerate(engine.knob_values()):
         chans.append(f"ch{c + 1} I={k:.2f} B={b:+.2f}{' (muted)' if muted else ''}")
     peak = engine.stats.take_peak()
-    return (f"{' | '.join(chans)} | underflows {output.stats.underflows} | "
-            f"load {100 * engine.stats.load_avg:.1f}% (peak {100 * peak:.0f}%)")
+    return (
+        f"{' | '.join(chans)} | underflows {output.stats.underflows} | "
+        f"load {100 * engine.stats.load_avg:.1f}% (peak {100 * peak:.0f}%)"
+    )
 
 
 def _load_presets(config: Any) -> tuple[Any, Any]:
@@ -240,7 +262,9 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
 
     def progress(fraction: float, message: str) -> None:
         if err.isatty():
-            print(f"\rvibsynth: building noise bank: {100 * fraction:3.0f}% {message}\x1b[K", end="", file=err, flush=True)
+            print(
+                f"\rvibsynth: building noise bank: {100 * fraction:3.0f}% {message}\x1b[K", end="", file=err, flush=True
+            )
 
     started = time.perf_counter()
     engine = build_engine(config, progress=progress)
@@ -252,10 +276,15 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
 
     library, watcher_cls = _load_presets(config)
     controller = Controller(
-        engine, limits=limits, preset_resolver=library.get if library is not None else None,
+        engine,
+        limits=limits,
+        preset_resolver=library.get if library is not None else None,
         initial_glide_s=float(knobs["glide_ms"]) / 1000.0,
     )
-    for name, value in (("balance", knobs.get("initial_balance", 0.0)), ("intensity", knobs.get("initial_intensity", 0.0))):
+    for name, value in (
+        ("balance", knobs.get("initial_balance", 0.0)),
+        ("intensity", knobs.get("initial_intensity", 0.0)),
+    ):
         if value:
             controller.set_knob(name, float(value), glide_s=0.0, source="config")
     if getattr(args, "preset", None):
@@ -265,10 +294,14 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
     if intensity is not None:
         controller.set_knob("intensity", intensity, glide_s=0.0, source="command line")
 
-    explicit = bool(getattr(args, "device", None) is not None or getattr(args, "output", None) == "sounddevice"
-                    or config.data["audio"].get("device") is not None)
-    output = open_output(config, engine, explicit, wav_path=getattr(args, "wav", None),
-                         seconds=getattr(args, "seconds", None))
+    explicit = bool(
+        getattr(args, "device", None) is not None
+        or getattr(args, "output", None) == "sounddevice"
+        or config.data["audio"].get("device") is not None
+    )
+    output = open_output(
+        config, engine, explicit, wav_path=getattr(args, "wav", None), seconds=getattr(args, "seconds", None)
+    )
     # The control adapters' /status reads output.state / output.state_reason through this.
     controller.output = output  # type: ignore[attr-defined]
 
@@ -294,8 +327,11 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
         prefix = str(config.data.get("osc", {}).get("prefix", "/vibsynth")).rstrip("/")
         silent = all(k == 0 for k, _, _ in engine.knob_values()) and not intensity
         hint = "silent until a control arrives; " if silent else ""
-        print(f"vibsynth: {hint}make it vibrate with: vibsynth send {prefix}/intensity 0.5"
-              f"  (Ctrl-C to stop)", file=out, flush=True)
+        print(
+            f"vibsynth: {hint}make it vibrate with: vibsynth send {prefix}/intensity 0.5  (Ctrl-C to stop)",
+            file=out,
+            flush=True,
+        )
 
         deadline = None if getattr(args, "seconds", None) is None else time.monotonic() + float(args.seconds)
         tty = out.isatty()

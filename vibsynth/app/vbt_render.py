@@ -1,5 +1,5 @@
-"""Decoding a ``.vbt`` trajectory through the engine into samples.
-"""
+"""Decoding a ``.vbt`` trajectory through the engine into samples."""
+
 from __future__ import annotations
 
 import os
@@ -102,8 +102,13 @@ def render(
     top, bottom = float(trajectory.level_db[loud].max()), float(trajectory.level_db[loud].min())
     ceiling = min(_MAX_CEILING_DB, top)
     range_db = min(_MAX_RANGE_DB, top - bottom + RANGE_MARGIN_DB)
-    ov: dict[str, Any] = {"audio.rate": fs, "audio.channels": 1, "knobs.ceiling_db": ceiling,
-                          "knobs.range_db": range_db, "knobs.initial_intensity": 0.0}
+    ov: dict[str, Any] = {
+        "audio.rate": fs,
+        "audio.channels": 1,
+        "knobs.ceiling_db": ceiling,
+        "knobs.range_db": range_db,
+        "knobs.initial_intensity": 0.0,
+    }
     ov.update(overrides or {})
     config = load_config(config_path, overrides=ov, user_file=False)
     engine = build_engine(config, basis=basis)
@@ -114,8 +119,9 @@ def render(
     peaks = np.interp(np.clip(balances, bank.balances[0], bank.balances[-1]), bank.balances, bank.peaks)
     allowed = 20.0 * np.log10(engine.limiter_ceiling / peaks) - LIMITER_MARGIN_DB
     offset = max(0.0, top - engine.ceiling_db, float(np.max(trajectory.level_db[loud] - allowed[loud])))
-    events = knob_schedule(trajectory, basis=basis, out_fs=fs, ceiling_db=engine.ceiling_db,
-                           range_db=engine.range_db, offset_db=offset)
+    events = knob_schedule(
+        trajectory, basis=basis, out_fs=fs, ceiling_db=engine.ceiling_db, range_db=engine.range_db, offset_db=offset
+    )
     for ev in events:
         at = ev.frame if ev.frame > 0 else None
         engine.submit(SetKnob("intensity", ev.intensity, at_frame=at, glide_s=ev.glide_s))

@@ -8,6 +8,7 @@ Modules are discovered automatically, so adding a command touches no shared file
 Errors raised on purpose (:class:`~vibsynth.errors.VibsynthError`) print one line
 ``vibsynth: error: ...`` and exit with code 2; nothing prints a traceback.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -15,7 +16,7 @@ import importlib
 import logging
 import pkgutil
 import sys
-from typing import Sequence
+from collections.abc import Sequence
 
 from vibsynth import __version__
 from vibsynth.errors import VibsynthError

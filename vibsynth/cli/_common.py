@@ -1,11 +1,12 @@
 """Argument types and helpers shared by the sub-commands (validation at the edge)."""
+
 from __future__ import annotations
 
 import argparse
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.filterbank import MIN_RATE_HZ

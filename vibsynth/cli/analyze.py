@@ -1,4 +1,5 @@
 """``vibsynth analyze``: intensity, balance and spectrum of recordings."""
+
 from __future__ import annotations
 
 import argparse
@@ -26,8 +27,10 @@ Measure each recording's two perceptual attributes:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "analyze", help="measure intensity and high/low balance of recordings",
-        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter,
+        "analyze",
+        help="measure intensity and high/low balance of recordings",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("files", nargs="+", metavar="FILE", help="WAV, or CSV/TXT with one column of samples")
     p.add_argument("--rate", type=sample_rate, metavar="HZ", help="sample rate of CSV/TXT files")
@@ -51,8 +54,10 @@ def _row(name: str, a: Analysis) -> str:
     flag = "*" if a.outside_database else " "
     level = f"{a.level_db:8.2f}" if math.isfinite(a.level_db) else "    -inf"
     shown = name if len(name) <= 32 else "…" + name[-31:]
-    return (f"{shown:<32} {a.duration_s:7.2f} {a.fs:8.0f} {level} {a.intensity_knob:6.3f} "
-            f"{a.balance:+8.3f}{flag} {a.t1:+8.2f} {a.non_stationarity_db:7.2f}")
+    return (
+        f"{shown:<32} {a.duration_s:7.2f} {a.fs:8.0f} {level} {a.intensity_knob:6.3f} "
+        f"{a.balance:+8.3f}{flag} {a.t1:+8.2f} {a.non_stationarity_db:7.2f}"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,7 +66,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps([{"file": p, "basis_id": basis.id, **a.to_dict()} for p, a in results], indent=2))
         return 0
-    print(f"{'file':<32} {'dur s':>7} {'rate Hz':>8} {'level dB':>8} {'knob':>6} {'balance':>9} {'t1':>8} {'nonstat':>7}")
+    print(
+        f"{'file':<32} {'dur s':>7} {'rate Hz':>8} {'level dB':>8} {'knob':>6} {'balance':>9} {'t1':>8} {'nonstat':>7}"
+    )
     for path, a in results:
         print(_row(path, a))
     if any(a.outside_database for _, a in results):

@@ -1,4 +1,5 @@
 """``vibsynth basis``: fit a spectral basis from recordings or PSDs, or show one."""
+
 from __future__ import annotations
 
 import argparse
@@ -17,7 +18,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("basis", help="fit or show a spectral basis (M, V1..V8)")
     sub = p.add_subparsers(dest="basis_command", metavar="ACTION", required=True)
     fit = sub.add_parser(
-        "fit", help="fit a basis by PCA",
+        "fit",
+        help="fit a basis by PCA",
         description="Fit M and V1..V8 by PCA over level-normalised 30-band dB spectra. SRC is a folder of "
         "recordings (.wav, or .csv/.txt with --rate) or a PSD table (.csv or .csv.gz whose frequency "
         "columns have numeric headers in Hz, like shared/datasets/hatt-psd/psd.csv.gz).",
@@ -55,8 +57,7 @@ def summary(basis: Basis) -> str:
         f"spectra            {basis.n_spectra}",
         f"bands              {basis.n_bands} ({basis.centres_hz[0]:g}-{basis.centres_hz[-1]:g} Hz), "
         f"Butterworth order {basis.filter_order}",
-        "explained variance " + " ".join(f"V{i + 1}={v:.1%}" for i, v in enumerate(evr))
-        + f"  (total {evr.sum():.2%})",
+        "explained variance " + " ".join(f"V{i + 1}={v:.1%}" for i, v in enumerate(evr)) + f"  (total {evr.sum():.2%})",
         f"t1 percentiles     p2={pct[2.0]:.2f}  p50={pct[50.0]:.2f}  p98={pct[98.0]:.2f}  "
         f"range {basis.t1_min:.2f}..{basis.t1_max:.2f} (balance {basis.balance_from_t1(basis.t1_min):+.2f}.."
         f"{basis.balance_from_t1(basis.t1_max):+.2f})",
@@ -64,7 +65,9 @@ def summary(basis: Basis) -> str:
     for key, value in basis.provenance.items():
         lines.append(f"{key:<18} {value}")
     lines.append("")
-    lines.append(f"{'band Hz':>9} {'M dB':>8} " + " ".join(f"{'V' + str(i + 1):>6}" for i in range(min(3, basis.n_components))))
+    lines.append(
+        f"{'band Hz':>9} {'M dB':>8} " + " ".join(f"{'V' + str(i + 1):>6}" for i in range(min(3, basis.n_components)))
+    )
     for k, fc in enumerate(basis.centres_hz):
         comps = " ".join(f"{basis.components[i, k]:+6.3f}" for i in range(min(3, basis.n_components)))
         lines.append(f"{fc:9.1f} {basis.mean_db[k]:+8.2f} {comps}")

@@ -1,4 +1,5 @@
 """``vibsynth encode`` / ``vibsynth decode``: the time-windowed (intensity, t1) codec and .vbt files."""
+
 from __future__ import annotations
 
 import argparse
@@ -33,12 +34,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     enc.add_argument("--bits", type=_bits, default=8, help="bits per value, 2..16 (default 8)")
     enc.add_argument("--window-ms", type=_ms, default=100.0, help="analysis window (default 100 ms)")
     enc.add_argument("--hop-ms", type=_ms, default=50.0, help="hop between windows (default 50 ms)")
-    enc.add_argument("--tolerance-db", type=finite_float, default=1.0,
-                     help="smallest intensity change kept between segments (default 1 dB)")
-    enc.add_argument("--tolerance-t1", type=finite_float, default=2.0,
-                     help="smallest t1 change kept between segments (default 2 t1 units)")
-    enc.add_argument("--per-window", action="store_true",
-                     help="no segmentation: code every window's own (noisy) values")
+    enc.add_argument(
+        "--tolerance-db",
+        type=finite_float,
+        default=1.0,
+        help="smallest intensity change kept between segments (default 1 dB)",
+    )
+    enc.add_argument(
+        "--tolerance-t1",
+        type=finite_float,
+        default=2.0,
+        help="smallest t1 change kept between segments (default 2 t1 units)",
+    )
+    enc.add_argument(
+        "--per-window", action="store_true", help="no segmentation: code every window's own (noisy) values"
+    )
     enc.add_argument("--rate", type=sample_rate, help="sample rate of CSV/TXT recordings (Hz)")
     enc.add_argument("--no-check", action="store_true", help="skip decoding to measure the quality")
     enc.add_argument("--json", action="store_true", help="machine-readable report")
@@ -79,28 +89,42 @@ def ratios(size_bytes: int, n_samples: int, fs: float) -> dict[str, float]:
 
 def _print_ratios(r: dict[str, float], fs: float) -> None:
     print(f"size: {r['size_bytes']} bytes for {r['duration_s']:.2f} s = {r['bytes_per_second']:.1f} bytes/s")
-    print(f"compression: {r['ratio_vs_pcm16_source']:.0f}:1 vs 16-bit PCM at {fs:g} Hz; "
-          f"{r['ratio_vs_pcm8_2800hz']:.0f}:1 vs 8-bit at 2.8 kHz (paper's reference)")
+    print(
+        f"compression: {r['ratio_vs_pcm16_source']:.0f}:1 vs 16-bit PCM at {fs:g} Hz; "
+        f"{r['ratio_vs_pcm8_2800hz']:.0f}:1 vs 8-bit at 2.8 kHz (paper's reference)"
+    )
 
 
 def _print_quality(q: Any) -> None:
-    print(f"band spectrum error (whole signal): RMS {q.band_error_rms_db:.2f} dB, max {q.band_error_max_db:.2f} dB "
-          f"(shape only {q.shape_error_rms_db:.2f} dB; the S1 model's own floor {q.s1_model_error_rms_db:.2f} dB)")
-    print(f"band spectrum error per window (median): {q.window_band_error_db:.2f} dB "
-          f"(includes 100 ms estimation noise of two independent noises)")
-    print(f"intensity error: whole {q.level_error_db:+.2f} dB; per window bias {q.window_level_bias_db:+.2f}, "
-          f"RMS {q.window_level_rms_db:.2f}, max {q.window_level_max_db:.2f} dB")
-    print(f"dissimilarity D(original, decoded) = {q.dissimilarity:.2f} t1 units (per window median "
-          f"{q.window_dissimilarity:.2f})")
-    print(f"non-stationarity: original {q.non_stationarity_original_db:.2f} dB, decoded "
-          f"{q.non_stationarity_decoded_db:.2f} dB")
+    print(
+        f"band spectrum error (whole signal): RMS {q.band_error_rms_db:.2f} dB, max {q.band_error_max_db:.2f} dB "
+        f"(shape only {q.shape_error_rms_db:.2f} dB; the S1 model's own floor {q.s1_model_error_rms_db:.2f} dB)"
+    )
+    print(
+        f"band spectrum error per window (median): {q.window_band_error_db:.2f} dB "
+        f"(includes 100 ms estimation noise of two independent noises)"
+    )
+    print(
+        f"intensity error: whole {q.level_error_db:+.2f} dB; per window bias {q.window_level_bias_db:+.2f}, "
+        f"RMS {q.window_level_rms_db:.2f}, max {q.window_level_max_db:.2f} dB"
+    )
+    print(
+        f"dissimilarity D(original, decoded) = {q.dissimilarity:.2f} t1 units (per window median "
+        f"{q.window_dissimilarity:.2f})"
+    )
+    print(
+        f"non-stationarity: original {q.non_stationarity_original_db:.2f} dB, decoded "
+        f"{q.non_stationarity_decoded_db:.2f} dB"
+    )
 
 
 def _basis_for(args: argparse.Namespace, basis_id: str) -> Any:
     basis = basis_from_args(args)
     if basis.id != basis_id:
-        raise InputError(f"{args.input}: encoded with basis {basis_id}, but the basis given is {basis.id} "
-                         f"(pass the right one with --basis)")
+        raise InputError(
+            f"{args.input}: encoded with basis {basis_id}, but the basis given is {basis.id} "
+            f"(pass the right one with --basis)"
+        )
     return basis
 
 
@@ -116,9 +140,16 @@ def run_encode(args: argparse.Namespace) -> int:
     basis = basis_from_args(args)
     started = time.perf_counter()
     try:
-        traj = encode_trajectory(rec.samples, fs=rec.fs, basis=basis, window_s=args.window_ms / 1000,
-                                 hop_s=args.hop_ms / 1000, segment=not args.per_window,
-                                 tolerance_db=args.tolerance_db, tolerance_t1=args.tolerance_t1)
+        traj = encode_trajectory(
+            rec.samples,
+            fs=rec.fs,
+            basis=basis,
+            window_s=args.window_ms / 1000,
+            hop_s=args.hop_ms / 1000,
+            segment=not args.per_window,
+            tolerance_db=args.tolerance_db,
+            tolerance_t1=args.tolerance_t1,
+        )
     except ParameterError as exc:
         raise InputError(f"{rec.path}: {exc}") from None
     quant = Quantizer.fit(traj, bits=args.bits)
@@ -126,26 +157,46 @@ def run_encode(args: argparse.Namespace) -> int:
     encode_s = time.perf_counter() - started
     decoded = vbt.decode_bytes(args.output.read_bytes(), name=str(args.output))
     report: dict[str, Any] = {
-        "input": str(rec.path), "output": str(args.output), "fs": rec.fs, "n_samples": int(rec.samples.size),
-        "bits": quant.bits, "window_ms": traj.window_s * 1000, "hop_ms": traj.hop_s * 1000,
-        "n_frames": traj.n_frames, "n_records": decoded.n_records, "run_length": decoded.run_length,
-        "level_range_db": [quant.level_lo, quant.level_hi], "level_step_db": quant.level_step,
-        "t1_range": [quant.t1_lo, quant.t1_hi], "t1_step": quant.t1_step,
-        "clipped_windows": quant.clipped(traj), "encode_seconds": encode_s,
+        "input": str(rec.path),
+        "output": str(args.output),
+        "fs": rec.fs,
+        "n_samples": int(rec.samples.size),
+        "bits": quant.bits,
+        "window_ms": traj.window_s * 1000,
+        "hop_ms": traj.hop_s * 1000,
+        "n_frames": traj.n_frames,
+        "n_records": decoded.n_records,
+        "run_length": decoded.run_length,
+        "level_range_db": [quant.level_lo, quant.level_hi],
+        "level_step_db": quant.level_step,
+        "t1_range": [quant.t1_lo, quant.t1_hi],
+        "t1_step": quant.t1_step,
+        "clipped_windows": quant.clipped(traj),
+        "encode_seconds": encode_s,
         **ratios(size, rec.samples.size, rec.fs),
     }
     if not args.no_check:
         rendered = vbt_render.render(decoded.trajectory, basis=basis)
-        q = quality(rec.samples, rendered.signal, fs=rec.fs, decoded_fs=rendered.fs, basis=basis,
-                    offset_db=rendered.offset_db, window_s=traj.window_s, hop_s=traj.hop_s)
+        q = quality(
+            rec.samples,
+            rendered.signal,
+            fs=rec.fs,
+            decoded_fs=rendered.fs,
+            basis=basis,
+            offset_db=rendered.offset_db,
+            window_s=traj.window_s,
+            hop_s=traj.hop_s,
+        )
         report["quality"] = q.to_dict()
     if args.json:
         print(json.dumps(report, indent=2, default=float))
         return 0
-    print(f"{rec.path} -> {args.output}: {traj.n_frames} windows of {traj.window_s * 1000:g} ms "
-          f"(hop {traj.hop_s * 1000:g} ms) in {decoded.n_records} {'segments' if decoded.run_length else 'records'}, "
-          f"{quant.bits} bits/value (intensity step {quant.level_step:.3f} dB over "
-          f"[{quant.level_lo:g}, {quant.level_hi:g}] dB; t1 step {quant.t1_step:.3f})")
+    print(
+        f"{rec.path} -> {args.output}: {traj.n_frames} windows of {traj.window_s * 1000:g} ms "
+        f"(hop {traj.hop_s * 1000:g} ms) in {decoded.n_records} {'segments' if decoded.run_length else 'records'}, "
+        f"{quant.bits} bits/value (intensity step {quant.level_step:.3f} dB over "
+        f"[{quant.level_lo:g}, {quant.level_hi:g}] dB; t1 step {quant.t1_step:.3f})"
+    )
     _print_ratios(report, rec.fs)
     if "quality" in report:
         _print_quality(q)
@@ -167,25 +218,41 @@ def run_decode(args: argparse.Namespace) -> int:
     write_wav(args.output, signal, rendered.fs)
     decode_s = time.perf_counter() - started
     report: dict[str, Any] = {
-        "input": str(args.input), "output": str(args.output), "fs": rendered.fs,
-        "offset_db": 0.0 if args.absolute else rendered.offset_db, "balance_clamped_windows": rendered.balance_clamped,
-        "knob_events": rendered.n_events, "decode_seconds": decode_s,
+        "input": str(args.input),
+        "output": str(args.output),
+        "fs": rendered.fs,
+        "offset_db": 0.0 if args.absolute else rendered.offset_db,
+        "balance_clamped_windows": rendered.balance_clamped,
+        "knob_events": rendered.n_events,
+        "decode_seconds": decode_s,
         **ratios(decoded.size_bytes, traj.n_samples, traj.fs),
     }
     q = None
     if args.reference is not None:
         ref = read_recording(args.reference, fs=args.reference_rate)
-        q = quality(ref.samples, signal, fs=ref.fs, decoded_fs=rendered.fs, basis=basis,
-                    offset_db=0.0 if args.absolute else rendered.offset_db, window_s=traj.window_s, hop_s=traj.hop_s)
+        q = quality(
+            ref.samples,
+            signal,
+            fs=ref.fs,
+            decoded_fs=rendered.fs,
+            basis=basis,
+            offset_db=0.0 if args.absolute else rendered.offset_db,
+            window_s=traj.window_s,
+            hop_s=traj.hop_s,
+        )
         report["quality"] = q.to_dict()
     if args.json:
         print(json.dumps(report, indent=2, default=float))
         return 0
-    print(f"{args.input} -> {args.output}: {len(signal) / rendered.fs:.2f} s at {rendered.fs:g} Hz, "
-          f"{rendered.n_events} knob moves")
+    print(
+        f"{args.input} -> {args.output}: {len(signal) / rendered.fs:.2f} s at {rendered.fs:g} Hz, "
+        f"{rendered.n_events} knob moves"
+    )
     if rendered.offset_db > 0 and not args.absolute:
-        print(f"level: rendered {rendered.offset_db:.1f} dB below the encoded absolute level "
-              f"(engine limit; --absolute undoes it in the float WAV)")
+        print(
+            f"level: rendered {rendered.offset_db:.1f} dB below the encoded absolute level "
+            f"(engine limit; --absolute undoes it in the float WAV)"
+        )
     if rendered.balance_clamped:
         print(f"warning: {rendered.balance_clamped} windows lie outside the engine's balance range (clamped)")
     _print_ratios(report, traj.fs)

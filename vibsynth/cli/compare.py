@@ -1,4 +1,5 @@
 """``vibsynth compare A B [C ...]``: the paper's dissimilarity D between recordings."""
+
 from __future__ import annotations
 
 import argparse
@@ -33,8 +34,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("files", nargs="+", type=Path, metavar="FILE", help="recordings (.wav, .csv/.txt with --rate)")
     p.add_argument("--rate", type=sample_rate, help="sample rate of CSV/TXT recordings (Hz)")
-    p.add_argument("--weights", type=_weights, metavar="W1,W2,...",
-                   help="weights (e.g. from `vibsynth dissim fit`); default 1,0,0,0,0,0,0,0")
+    p.add_argument(
+        "--weights",
+        type=_weights,
+        metavar="W1,W2,...",
+        help="weights (e.g. from `vibsynth dissim fit`); default 1,0,0,0,0,0,0,0",
+    )
     p.add_argument("--json", action="store_true", help="machine-readable output")
     add_basis_argument(p)
     p.set_defaults(func=run)
@@ -51,8 +56,13 @@ def run(args: argparse.Namespace) -> int:
     d = dissimilarity_matrix(scores, weights)
     names = [str(f) for f in args.files]
     if args.json:
-        out = {"weights": weights.tolist(), "basis": basis.id, "files": names,
-               "t1": scores[:, 0].tolist(), "matrix": d.tolist()}
+        out = {
+            "weights": weights.tolist(),
+            "basis": basis.id,
+            "files": names,
+            "t1": scores[:, 0].tolist(),
+            "matrix": d.tolist(),
+        }
         if len(names) == 2:
             out["D"] = float(d[0, 1])
         print(json.dumps(out, indent=2))

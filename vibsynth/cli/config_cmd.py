@@ -1,4 +1,5 @@
 """``vibsynth config show|check|path``: the effective configuration and where each value comes from."""
+
 from __future__ import annotations
 
 import argparse
@@ -36,8 +37,11 @@ def cmd_show(args: argparse.Namespace) -> int:
         if not leaves:
             config.get(args.key)  # raises with a "did you mean"
     if args.json:
-        print(json.dumps({k: {"value": v, "source": config.sources.get(k, "")} for k, v in leaves.items()},
-                         indent=2, default=str))
+        print(
+            json.dumps(
+                {k: {"value": v, "source": config.sources.get(k, "")} for k, v in leaves.items()}, indent=2, default=str
+            )
+        )
         return 0
     if args.yaml:
         print(yaml.safe_dump(config.data, sort_keys=False, default_flow_style=None), end="")
@@ -71,10 +75,12 @@ def cmd_path(args: argparse.Namespace) -> int:
 def register(subparsers: Any) -> None:
     """Add ``vibsynth config ...``."""
     parser = subparsers.add_parser(
-        "config", help="show the effective configuration or check a config file",
+        "config",
+        help="show the effective configuration or check a config file",
         description="Configuration (docs/config.md). Layers: built-in defaults < user config file "
-                    "(--config, $VIBSYNTH_CONFIG or the platform folder) < VIBSYNTH_* environment variables < "
-                    "command line (--set KEY=VALUE).")
+        "(--config, $VIBSYNTH_CONFIG or the platform folder) < VIBSYNTH_* environment variables < "
+        "command line (--set KEY=VALUE).",
+    )
     sub = parser.add_subparsers(dest="config_command", metavar="ACTION", required=True)
 
     p = sub.add_parser("show", help="effective config, each value with its source")

@@ -1,4 +1,5 @@
 """``vibsynth devices``: audio host APIs and output devices (and MIDI inputs)."""
+
 from __future__ import annotations
 
 import argparse
@@ -32,8 +33,10 @@ def run(args: argparse.Namespace) -> int:
     for d in devices:
         api = apis[d["hostapi"]]["name"] if d["hostapi"] < len(apis) else "?"
         mark = "*" if any(a["default_output_device"] == d["index"] for a in apis) else " "
-        print(f" {mark}{d['index']:3d}: {d['name']}  [{api}, {d['max_output_channels']} out, "
-              f"{d['default_samplerate']:g} Hz, low latency {1000 * d['default_low_output_latency']:.1f} ms]")
+        print(
+            f" {mark}{d['index']:3d}: {d['name']}  [{api}, {d['max_output_channels']} out, "
+            f"{d['default_samplerate']:g} Hz, low latency {1000 * d['default_low_output_latency']:.1f} ms]"
+        )
     try:
         from vibsynth.control.midi.adapter import list_inputs
     except ImportError:

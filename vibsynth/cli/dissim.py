@@ -1,4 +1,5 @@
 """``vibsynth dissim fit RATINGS.csv``: fit the dissimilarity weights the paper's way."""
+
 from __future__ import annotations
 
 import argparse
@@ -28,8 +29,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     fit.add_argument("--splits", type=_positive_int, default=100, help="random 80/20 splits (default 100)")
     fit.add_argument("--seed", type=int, default=0, help="seed of the splits and folds (default 0)")
     fit.add_argument("--cv", type=_positive_int, default=10, help="cross-validation folds (default 10)")
-    fit.add_argument("--solver", choices=("lars", "cd"), default="lars",
-                     help="lars = LassoLarsCV (exact path, fast); cd = LassoCV (coordinate descent)")
+    fit.add_argument(
+        "--solver",
+        choices=("lars", "cd"),
+        default="lars",
+        help="lars = LassoLarsCV (exact path, fast); cd = LassoCV (coordinate descent)",
+    )
     fit.add_argument("--allow-negative", action="store_true", help="do not constrain weights to be >= 0")
     fit.add_argument("--no-self-pairs", action="store_true", help="ignore ratings of a file with itself")
     fit.add_argument("--rate", type=sample_rate, help="sample rate of CSV/TXT recordings (Hz)")
@@ -45,22 +50,40 @@ def run_fit(args: argparse.Namespace) -> int:
     table = read_ratings(args.ratings)
     basis = basis_from_args(args)
     scores = scores_for_files(table.files, basis=basis, fs=args.rate, progress=Progress("analysing"))
-    fit = fit_from_ratings(table, scores, include_self_pairs=not args.no_self_pairs, n_splits=args.splits,
-                           seed=args.seed, cv=args.cv, positive=not args.allow_negative, solver=args.solver)
+    fit = fit_from_ratings(
+        table,
+        scores,
+        include_self_pairs=not args.no_self_pairs,
+        n_splits=args.splits,
+        seed=args.seed,
+        cv=args.cv,
+        positive=not args.allow_negative,
+        solver=args.solver,
+    )
     if args.json:
         out = fit.to_dict()
-        out.update({"ratings": str(table.path), "files": [str(f) for f in table.files], "basis": basis.id,
-                    "n_rows": table.n_rows})
+        out.update(
+            {
+                "ratings": str(table.path),
+                "files": [str(f) for f in table.files],
+                "basis": basis.id,
+                "n_rows": table.n_rows,
+            }
+        )
         print(json.dumps(out, indent=2))
         return 0
     k = fit.weights.size
-    print(f"{table.n_rows} ratings -> {fit.n_pairs} pairs of {len(table.files)} recordings "
-          f"(basis {basis.id}); {fit.n_splits} splits of {fit.n_train} train / {fit.n_test} test, "
-          f"{fit.cv}-fold CV, {'non-negative ' if fit.positive else ''}Lasso ({fit.solver})")
+    print(
+        f"{table.n_rows} ratings -> {fit.n_pairs} pairs of {len(table.files)} recordings "
+        f"(basis {basis.id}); {fit.n_splits} splits of {fit.n_train} train / {fit.n_test} test, "
+        f"{fit.cv}-fold CV, {'non-negative ' if fit.positive else ''}Lasso ({fit.solver})"
+    )
     print(f"test R^2 = {fit.r2_mean:.3f} (SD {fit.r2_sd:.3f})      [paper: 0.54, SD 0.11]")
     print(f"intercept (identical pair) = {fit.intercept:.4f}; penalty alpha = {fit.alpha:.3g}")
     print("component   weight (all pairs)   mean +- SD over splits   selected   R^2 alone   R^2 first i")
     for j in range(k):
-        print(f"  T{j + 1:<8} {fit.weights[j]:>14.5f}   {fit.weights_mean[j]:>10.5f} +- {fit.weights_sd[j]:<9.5f}"
-              f" {100 * fit.selected_fraction[j]:>7.0f} %   {fit.r2_single_mean[j]:>9.3f}   {fit.r2_first_mean[j]:>10.3f}")
+        print(
+            f"  T{j + 1:<8} {fit.weights[j]:>14.5f}   {fit.weights_mean[j]:>10.5f} +- {fit.weights_sd[j]:<9.5f}"
+            f" {100 * fit.selected_fraction[j]:>7.0f} %   {fit.r2_single_mean[j]:>9.3f}   {fit.r2_first_mean[j]:>10.3f}"
+        )
     return 0

@@ -1,4 +1,5 @@
 """``vibsynth plot basis | spectrum | presets | mds``: PNG figures of the paper's analyses."""
+
 from __future__ import annotations
 
 import argparse
@@ -15,8 +16,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sub = p.add_subparsers(dest="plot_command", metavar="FIGURE", required=True)
 
     def common(q: argparse.ArgumentParser, default: str) -> None:
-        q.add_argument("-o", "--output", type=Path, default=Path(default), metavar="FILE.png",
-                       help=f"PNG to write (default {default})")
+        q.add_argument(
+            "-o",
+            "--output",
+            type=Path,
+            default=Path(default),
+            metavar="FILE.png",
+            help=f"PNG to write (default {default})",
+        )
         add_basis_argument(q)
 
     q = sub.add_parser("basis", help="M and V1..V8 over frequency (paper Fig. 6a)")
@@ -98,6 +105,8 @@ def run_mds(args: argparse.Namespace) -> int:
     table = read_ratings(args.ratings)
     scores = scores_for_files(table.files, basis=basis, fs=args.rate)
     m = mds_map(table, scores, weights=weights)
-    print(f"V1 vs MDS dimensions: r = {m.component_r[0, 0]:+.2f}, {m.component_r[0, 1]:+.2f}; "
-          f"Procrustes RMS error {m.procrustes_rms:.3f}")
+    print(
+        f"V1 vs MDS dimensions: r = {m.component_r[0, 0]:+.2f}, {m.component_r[0, 1]:+.2f}; "
+        f"Procrustes RMS error {m.procrustes_rms:.3f}"
+    )
     return _done(plot_mds(m, args.output, title=f"Perceptual space of {table.path.name}"))

@@ -1,4 +1,5 @@
 """``vibsynth preset list|show|new|from-recording|play``: the designer's preset workflow."""
+
 from __future__ import annotations
 
 import argparse
@@ -54,7 +55,7 @@ def _tags(text: str) -> list[str]:
 def _library(args: argparse.Namespace) -> tuple[Config, PresetLibrary]:
     config = config_from_args(args)
     library = load_library(config)
-    for path, message in library.errors.items():
+    for _path, message in library.errors.items():
         print(f"vibsynth: warning: {message}", file=sys.stderr)
     return config, library
 
@@ -83,8 +84,15 @@ def cmd_list(args: argparse.Namespace) -> int:
     if args.tag:
         presets = [p for p in presets if args.tag in p.tags]
     if args.json:
-        print(json.dumps([{**p.to_dict(), "program": programs.get(p.name), "origin": p.origin,
-                           "path": str(p.path)} for p in presets], indent=2))
+        print(
+            json.dumps(
+                [
+                    {**p.to_dict(), "program": programs.get(p.name), "origin": p.origin, "path": str(p.path)}
+                    for p in presets
+                ],
+                indent=2,
+            )
+        )
         return 0
     if args.sort == "balance":
         presets.sort(key=lambda p: p.balance)
@@ -96,8 +104,10 @@ def cmd_list(args: argparse.Namespace) -> int:
         prog = "-" if number is None else (str(number) if p.program is not None else f"{number}*")
         rows.append([p.name, f"{p.intensity:.3f}", f"{p.balance:+.3f}", prog, p.origin, ", ".join(p.tags)])
     print(_fmt_table(rows))
-    print(f"\n{len(presets)} presets; user folder: {library.user_dir}" +
-          ("; * = program by name order (no program: field)" if any(r[3].endswith("*") for r in rows[1:]) else ""))
+    print(
+        f"\n{len(presets)} presets; user folder: {library.user_dir}"
+        + ("; * = program by name order (no program: field)" if any(r[3].endswith("*") for r in rows[1:]) else "")
+    )
     return 0
 
 
@@ -117,8 +127,13 @@ def cmd_new(args: argparse.Namespace) -> int:
     base: dict[str, Any] = {}
     if args.like:
         template = library.get(args.like)
-        base = {"intensity": template.intensity, "balance": template.balance, "glide_ms": template.glide_ms,
-                "tags": template.tags, "description": template.description}
+        base = {
+            "intensity": template.intensity,
+            "balance": template.balance,
+            "glide_ms": template.glide_ms,
+            "tags": template.tags,
+            "description": template.description,
+        }
     intensity = args.intensity if args.intensity is not None else base.get("intensity")
     balance = args.balance if args.balance is not None else base.get("balance")
     if intensity is None or balance is None:
@@ -153,24 +168,34 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
     basis = load_basis(args.basis) if args.basis else default_basis()
     knobs = config.section("knobs")
     try:
-        result = analyze(recording.samples, fs=recording.fs, basis=basis, ceiling_db=knobs["ceiling_db"],
-                         range_db=knobs["range_db"])
+        result = analyze(
+            recording.samples, fs=recording.fs, basis=basis, ceiling_db=knobs["ceiling_db"], range_db=knobs["range_db"]
+        )
     except ParameterError as exc:
         raise PresetError(f"{recording.path}: {exc}") from None
     intensity = min(1.0, max(0.0, result.intensity_knob))
     if intensity != result.intensity_knob:
-        print(f"vibsynth: warning: {recording.path}: level {result.level_db:.1f} dB maps to intensity "
-              f"{result.intensity_knob:.3f}, outside [0, 1] with knobs.ceiling_db = {knobs['ceiling_db']:g} and "
-              f"range_db = {knobs['range_db']:g}; clamped to {intensity:g}", file=sys.stderr)
+        print(
+            f"vibsynth: warning: {recording.path}: level {result.level_db:.1f} dB maps to intensity "
+            f"{result.intensity_knob:.3f}, outside [0, 1] with knobs.ceiling_db = {knobs['ceiling_db']:g} and "
+            f"range_db = {knobs['range_db']:g}; clamped to {intensity:g}",
+            file=sys.stderr,
+        )
     balance = result.balance
     if abs(balance) > BALANCE_LIMIT:
         clamped = math.copysign(BALANCE_LIMIT, balance)
-        print(f"vibsynth: warning: {recording.path}: balance {balance:+.3f} is beyond the preset limit "
-              f"+-{BALANCE_LIMIT:g}; clamped to {clamped:+g}", file=sys.stderr)
+        print(
+            f"vibsynth: warning: {recording.path}: balance {balance:+.3f} is beyond the preset limit "
+            f"+-{BALANCE_LIMIT:g}; clamped to {clamped:+g}",
+            file=sys.stderr,
+        )
         balance = clamped
     if result.outside_database:
-        print(f"vibsynth: note: {recording.path}: t1 = {result.t1:.2f} lies outside the basis' database "
-              "(represented, not clamped)", file=sys.stderr)
+        print(
+            f"vibsynth: note: {recording.path}: t1 = {result.t1:.2f} lies outside the basis' database "
+            "(represented, not clamped)",
+            file=sys.stderr,
+        )
     digest = hashlib.sha256(recording.path.read_bytes()).hexdigest()[:16]
     provenance = {
         "recording": recording.path.name,
@@ -189,12 +214,21 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
         "created_by": f"vibsynth {__version__} (preset from-recording)",
     }
     name = args.name or recording.path.stem
-    preset = Preset(name=name, intensity=round(intensity, 4), balance=round(balance, 4),
-                    description=args.description or f"From the recording {recording.path.name}.",
-                    glide_ms=args.glide_ms, program=args.program, tags=tuple(args.tags or ()), provenance=provenance)
+    preset = Preset(
+        name=name,
+        intensity=round(intensity, 4),
+        balance=round(balance, 4),
+        description=args.description or f"From the recording {recording.path.name}.",
+        glide_ms=args.glide_ms,
+        program=args.program,
+        tags=tuple(args.tags or ()),
+        provenance=provenance,
+    )
     path = _write_new(library, preset, args.output, args.force)
-    print(f"wrote {path}: intensity {preset.intensity:.3f}, balance {preset.balance:+.3f} "
-          f"(level {result.level_db:.1f} dB, t1 {result.t1:.2f})")
+    print(
+        f"wrote {path}: intensity {preset.intensity:.3f}, balance {preset.balance:+.3f} "
+        f"(level {result.level_db:.1f} dB, t1 {result.t1:.2f})"
+    )
     return 0
 
 
@@ -217,8 +251,12 @@ def render_preset(config: Config, library: PresetLibrary, name: str, seconds: fl
     preset = library.get(name)
     engine = build_engine(config)
     knobs = config.section("knobs")
-    controller = Controller(engine, limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),
-                            preset_resolver=library.get, initial_glide_s=knobs["glide_ms"] / 1000.0)
+    controller = Controller(
+        engine,
+        limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),
+        preset_resolver=library.get,
+        initial_glide_s=knobs["glide_ms"] / 1000.0,
+    )
     controller.load_preset(preset.name, source="cli")
     fs = float(engine.fs)
     total = int(round(seconds * fs))
@@ -227,7 +265,7 @@ def render_preset(config: Config, library: PresetLibrary, name: str, seconds: fl
     done = 0
     while done < total:
         n = min(block, total - done)
-        out[done:done + n] = engine.render(n)
+        out[done : done + n] = engine.render(n)
         done += n
     return out, fs
 
@@ -244,8 +282,10 @@ def cmd_play(args: argparse.Namespace) -> int:
 
         samples, fs = render_preset(config, library, preset.name, args.seconds)
         write_wav(args.output, samples, fs, sample_format=args.format)
-        print(f"wrote {args.output}: {preset.name} (intensity {preset.intensity:.3f}, balance {preset.balance:+.3f}),"
-              f" {args.seconds:g} s at {fs:g} Hz, {samples.shape[1]} channel(s)")
+        print(
+            f"wrote {args.output}: {preset.name} (intensity {preset.intensity:.3f}, balance {preset.balance:+.3f}),"
+            f" {args.seconds:g} s at {fs:g} Hz, {samples.shape[1]} channel(s)"
+        )
         return 0
     import time
 
@@ -257,8 +297,12 @@ def cmd_play(args: argparse.Namespace) -> int:
         raise PresetError(f"preset play needs vibsynth.app.service ({exc}); use -o FILE.wav meanwhile") from None
     engine = build_engine(config)
     knobs = config.section("knobs")
-    controller = Controller(engine, limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),
-                            preset_resolver=library.get, initial_glide_s=knobs["glide_ms"] / 1000.0)
+    controller = Controller(
+        engine,
+        limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),
+        preset_resolver=library.get,
+        initial_glide_s=knobs["glide_ms"] / 1000.0,
+    )
     output = open_output(config, engine, args.device is not None)
     output.start()
     try:
@@ -275,9 +319,12 @@ def cmd_play(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- parser
 def register(subparsers: Any) -> None:
     """Add ``vibsynth preset ...``."""
-    parser = subparsers.add_parser("preset", help="list, show, create and play presets",
-                                   description="Presets: named textures in YAML files (docs/presets.md). "
-                                   "User presets override shipped ones of the same name.")
+    parser = subparsers.add_parser(
+        "preset",
+        help="list, show, create and play presets",
+        description="Presets: named textures in YAML files (docs/presets.md). "
+        "User presets override shipped ones of the same name.",
+    )
     sub = parser.add_subparsers(dest="preset_command", metavar="ACTION", required=True)
 
     p = sub.add_parser("list", help="table of presets: name, intensity, balance, program, tags")

@@ -1,4 +1,5 @@
 """``vibsynth render``: a texture (or a recording's paper variant, or a MIDI performance) to a WAV file."""
+
 from __future__ import annotations
 
 import argparse
@@ -39,8 +40,10 @@ The band powers of the result match the target within rounding (closed-form synt
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "render", help="render a texture to a WAV file",
-        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter,
+        "render",
+        help="render a texture to a WAV file",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     source = p.add_mutually_exclusive_group(required=True)
     source.add_argument("--balance", type=finite_float, metavar="B", help="high/low balance (knob units)")
@@ -50,8 +53,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--channel", type=int, default=0, metavar="N", help="channel of a multi-channel WAV (with --from)")
     p.add_argument("--variant", choices=list(VARIANTS), default="S1", help="variant (with --from; default S1)")
     p.add_argument("--seconds", type=positive_seconds, default=None, metavar="S", help="duration (default 4 s)")
-    p.add_argument("--rate", type=sample_rate, default=None, metavar="HZ",
-                   help="output rate (default 48000; with --from, the recording's rate; also the rate of CSV/TXT input)")
+    p.add_argument(
+        "--rate",
+        type=sample_rate,
+        default=None,
+        metavar="HZ",
+        help="output rate (default 48000; with --from, the recording's rate; also the rate of CSV/TXT input)",
+    )
     p.add_argument("-o", "--output", required=True, metavar="OUT.wav", help="WAV file to write")
     p.add_argument("--format", choices=("float32", "pcm16"), default="float32", help="WAV sample format")
     p.add_argument("--seed", type=int, default=None, help="random phases (default: fresh)")
@@ -77,7 +85,9 @@ def _render_midi(args: argparse.Namespace) -> tuple[np.ndarray, float]:
         presets = load_library(config)
     except ImportError:
         presets = None
-    return render_midi_file(args.midi, config=config, basis=basis_from_args(args), seconds=args.seconds, presets=presets)
+    return render_midi_file(
+        args.midi, config=config, basis=basis_from_args(args), seconds=args.seconds, presets=presets
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -98,7 +108,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         analysis = analyze_file(args.from_file, args, basis)
         fs = args.rate or analysis.fs
-    shaper = SpectralShaper(fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order)
+    shaper = SpectralShaper(
+        fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order
+    )
     if analysis is None:
         level = knob_to_level_db(args.intensity, ceiling_db=args.ceiling_db, range_db=args.range_db)
         weights = shaper.solve_balance(basis, args.balance, level_db=level)

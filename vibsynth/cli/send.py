@@ -1,4 +1,5 @@
 """``vibsynth send``: send one OSC message to a running ``vibsynth serve`` (and print its replies)."""
+
 from __future__ import annotations
 
 import argparse
@@ -8,7 +9,7 @@ import select
 import socket
 import sys
 import time
-from typing import Sequence
+from collections.abc import Sequence
 
 from vibsynth.control.osc.codec import (
     IMMEDIATE,
@@ -98,19 +99,34 @@ def format_message(msg: Message) -> str:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("send", help="send an OSC message to a running server (for tests and scripts)",
-                              description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "send",
+        help="send an OSC message to a running server (for tests and scripts)",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("address", metavar="ADDRESS", help="OSC address, e.g. /vibsynth/intensity")
     p.add_argument("args", nargs="*", metavar="ARG", help="arguments (types inferred unless --types)")
     p.add_argument("--host", default=None, help="server host (default: osc.host from the config, 127.0.0.1)")
     p.add_argument("--port", type=int, default=None, help="server UDP port (default: osc.port, 9570)")
     p.add_argument("--types", default=None, metavar="TAGS", help="force type tags, e.g. 'fs' or ',fs'")
-    p.add_argument("--delay", type=float, default=None, metavar="S",
-                   help="send inside a bundle timetagged S seconds from now (0 = immediate bundle)")
-    p.add_argument("--wait-reply", type=float, default=0.0, metavar="SECONDS",
-                   help="wait up to SECONDS for replies and print them")
-    p.add_argument("--from-port", type=int, default=0, metavar="PORT",
-                   help="local UDP port to send from (replies come back to it; default: any)")
+    p.add_argument(
+        "--delay",
+        type=float,
+        default=None,
+        metavar="S",
+        help="send inside a bundle timetagged S seconds from now (0 = immediate bundle)",
+    )
+    p.add_argument(
+        "--wait-reply", type=float, default=0.0, metavar="SECONDS", help="wait up to SECONDS for replies and print them"
+    )
+    p.add_argument(
+        "--from-port",
+        type=int,
+        default=0,
+        metavar="PORT",
+        help="local UDP port to send from (replies come back to it; default: any)",
+    )
     p.set_defaults(func=run)
 
 

@@ -1,4 +1,5 @@
 """``vibsynth serve``: run the real-time engine on an audio output, with OSC/MIDI control."""
+
 from __future__ import annotations
 
 import argparse
@@ -37,8 +38,12 @@ def _device(text: str) -> int | str:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("serve", help="run the real-time engine (audio output + OSC/MIDI control)",
-                              description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "serve",
+        help="run the real-time engine (audio output + OSC/MIDI control)",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     try:
         from vibsynth.settings.config import add_config_arguments
     except ImportError:
@@ -49,10 +54,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--balance", type=finite_float, metavar="B", help="initial balance (knob units)")
     p.add_argument("--intensity", type=unit_interval, metavar="I", help="initial intensity 0..1 (default 0: silent)")
     p.add_argument("--channels", type=_channels, metavar="N", help="actuator channels (default audio.channels)")
-    p.add_argument("--output", choices=("auto", "sounddevice", "null", "wav"), default=None,
-                   help="output backend (default audio.backend, auto)")
-    p.add_argument("--device", type=_device, metavar="NAME|INDEX",
-                   help="audio output device (name substring or index; see `vibsynth devices`)")
+    p.add_argument(
+        "--output",
+        choices=("auto", "sounddevice", "null", "wav"),
+        default=None,
+        help="output backend (default audio.backend, auto)",
+    )
+    p.add_argument(
+        "--device",
+        type=_device,
+        metavar="NAME|INDEX",
+        help="audio output device (name substring or index; see `vibsynth devices`)",
+    )
     p.add_argument("--seconds", type=_seconds, metavar="S", help="stop after S seconds")
     p.add_argument("-o", dest="wav", metavar="FILE.wav", help="file of the wav output")
     from vibsynth.control import adapter_modules

@@ -12,6 +12,7 @@ service calls without knowing the protocol:
 A :class:`ControlServer` has ``name``, ``start()``, ``stop()`` and ``describe()``
 (one line for the start-up banner, e.g. ``OSC on udp://127.0.0.1:9570``).
 """
+
 from __future__ import annotations
 
 import importlib

@@ -18,13 +18,15 @@ time order still leave the latest-timed value as the target. Its lock guards onl
 small state (and keeps submission order equal to state order); the audio thread never
 takes it.
 """
+
 from __future__ import annotations
 
 import math
 import threading
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import Callable, Iterable, Protocol, Sequence
+from typing import Protocol
 
 from vibsynth.engine.commands import KNOB_NAMES, Command, Panic, SetGlide, SetKnob, SetMute
 from vibsynth.errors import ParameterError, PresetError
@@ -202,8 +204,9 @@ class Controller:
             listeners = list(self._listeners) if events else []
         _notify(listeners, events)
 
-    def _set_if_latest(self, c: int, field: str, value: object, frame: int, source: str,
-                       events: list[KnobEvent]) -> None:
+    def _set_if_latest(
+        self, c: int, field: str, value: object, frame: int, source: str, events: list[KnobEvent]
+    ) -> None:
         """With the lock held: set ``field`` of channel ``c`` unless a later-timed value waits."""
         effective = self._effective[c]
         if frame < effective.get(field, -1):
@@ -350,8 +353,13 @@ class Controller:
     def get(self, name: str, channel: int = 0) -> float | bool | str | None:
         """One value of one channel: intensity, balance, glide (s), mute, preset."""
         state = self.state()[self._channel_list([channel])[0]]
-        fields = {"intensity": state.intensity, "balance": state.balance, "glide": state.glide_s,
-                  "mute": state.muted, "preset": state.preset}
+        fields = {
+            "intensity": state.intensity,
+            "balance": state.balance,
+            "glide": state.glide_s,
+            "mute": state.muted,
+            "preset": state.preset,
+        }
         if name not in fields:
             raise ParameterError(f"unknown setting {name!r}; known: {', '.join(fields)}")
         return fields[name]

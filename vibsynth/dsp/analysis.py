@@ -5,6 +5,7 @@ its high/low balance (t1 on the basis' V1, and in knob units), all 8 scores, the
 30-band dB spectrum, and the paper's non-stationarity metric. :func:`variant_spectra`
 gives the target spectra of the paper's experiment-3 stimuli (S1, S1:8, S2:8, M).
 """
+
 from __future__ import annotations
 
 import math

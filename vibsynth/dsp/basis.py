@@ -20,12 +20,14 @@ values beyond +-1 are legal and simply further out.
 No I/O here: :meth:`Basis.to_dict` / :meth:`Basis.from_dict` give plain data that
 :mod:`vibsynth.formats` writes and reads as YAML.
 """
+
 from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -136,9 +138,7 @@ class Basis:
     @property
     def id(self) -> str:
         """Short content hash (12 hex digits) of the numbers that define the basis."""
-        payload = json.dumps(
-            {k: v for k, v in self._numbers().items()}, sort_keys=True, separators=(",", ":")
-        )
+        payload = json.dumps({k: v for k, v in self._numbers().items()}, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(payload.encode()).hexdigest()[:12]
 
     # ----------------------------------------------------------------- scores
@@ -255,7 +255,7 @@ class Basis:
         return {"format": BASIS_FORMAT, "id": self.id, **self._numbers(), "provenance": dict(self.provenance)}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "Basis":
+    def from_dict(cls, data: Mapping[str, Any]) -> Basis:
         """Build a basis from :meth:`to_dict` data, validating shapes and values.
 
         Raises
@@ -406,7 +406,9 @@ def fit_basis(
     if x.ndim != 2 or x.shape[1] != centres.size:
         raise ParameterError(f"expected band spectra of shape (n, {centres.size}), got {x.shape}")
     if x.shape[0] <= n_components:
-        raise ParameterError(f"need more than {n_components} spectra to fit {n_components} components, got {x.shape[0]}")
+        raise ParameterError(
+            f"need more than {n_components} spectra to fit {n_components} components, got {x.shape[0]}"
+        )
     if not np.all(np.isfinite(x)):
         raise ParameterError("band spectra contain NaN or infinite values")
     shapes = normalise_db(x)

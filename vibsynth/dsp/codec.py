@@ -44,11 +44,13 @@ between the two windows that straddle it, spread over one hop.
 
 No I/O here: arrays in, arrays out (the file format is :mod:`vibsynth.formats.vbt`).
 """
+
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -154,7 +156,9 @@ def encode_stationary(band_db: ArrayLike, level_db: ArrayLike, *, basis: Basis) 
     spectra = np.asarray(band_db, dtype=np.float64)
     levels = np.asarray(level_db, dtype=np.float64)
     if spectra.ndim != 2 or levels.shape != (spectra.shape[0],):
-        raise ParameterError(f"need band_db (n, {basis.n_bands}) and level_db (n,), got {spectra.shape}, {levels.shape}")
+        raise ParameterError(
+            f"need band_db (n, {basis.n_bands}) and level_db (n,), got {spectra.shape}, {levels.shape}"
+        )
     if not (np.all(np.isfinite(spectra)) and np.all(np.isfinite(levels))):
         raise ParameterError("band spectra and levels must be finite")
     t1 = basis.scores(spectra)[:, 0]
@@ -285,11 +289,11 @@ def _noise(y: NDArray[np.float64], runs: list[tuple[int, int]]) -> tuple[float, 
         return 1e-9, 1.0
 
     def gamma(k: int) -> float:
-        d = np.concatenate([y[a + k:b] - y[a:b - k] for a, b in runs if b - a > k])
+        d = np.concatenate([y[a + k : b] - y[a : b - k] for a, b in runs if b - a > k])
         return 0.5 * (1.4826 * float(np.median(np.abs(d)))) ** 2
 
     g = np.array([gamma(k) for k in range(1, lag + 1)])
-    var = float(np.median(g[lag // 2:]))  # plateau of the variogram
+    var = float(np.median(g[lag // 2 :]))  # plateau of the variogram
     if var <= 0:
         return 1e-9, 1.0
     r = 1.0 - g / var
@@ -343,7 +347,9 @@ def _segment(
 _REFINE = 4
 
 
-def _refine(series: Sequence[NDArray[np.float64]], sigmas: Sequence[float], runs: list[tuple[int, int]]) -> list[tuple[int, int]]:
+def _refine(
+    series: Sequence[NDArray[np.float64]], sigmas: Sequence[float], runs: list[tuple[int, int]]
+) -> list[tuple[int, int]]:
     """Move each boundary between adjacent segments within +-4 windows to fit the segment means best.
 
     The global split maximises a statistic over the whole segment, which slow noise
@@ -364,7 +370,7 @@ def _refine(series: Sequence[NDArray[np.float64]], sigmas: Sequence[float], runs
         for cand in range(lo, hi + 1):
             cost = 0.0
             for y, sd in zip(series, sigmas):
-                ma, mb = float(np.mean(y[left[0]:k])), float(np.mean(y[k:right[1]]))
+                ma, mb = float(np.mean(y[left[0] : k])), float(np.mean(y[k : right[1]]))
                 fit = np.where(span < cand, ma, mb)
                 cost += float(np.sum(((y[span] - fit) / sd) ** 2))
             if cost < best - 1e-12:
@@ -414,8 +420,9 @@ def encode_trajectory(
     for name, v in (("tolerance_db", tolerance_db), ("tolerance_t1", tolerance_t1), ("min_t", min_t)):
         if not math.isfinite(v) or v < 0:
             raise ParameterError(f"{name} must be >= 0, got {v}")
-    frames = band_power_frames(arr, fs=fs, window_s=window / fs, hop_s=hop / fs,
-                               centres=basis.centres_hz, order=basis.filter_order)
+    frames = band_power_frames(
+        arr, fs=fs, window_s=window / fs, hop_s=hop / fs, centres=basis.centres_hz, order=basis.filter_order
+    )
     with np.errstate(divide="ignore"):
         levels = intensity_frames_db(arr, fs=fs, window_s=window / fs, hop_s=hop / fs)
     n = min(frames.shape[0], levels.size)
@@ -451,8 +458,9 @@ def encode_trajectory(
         first = int(np.flatnonzero(~silent)[0])
         idx[idx < 0] = first
         t1_out = t1_out[idx]
-    return Trajectory(fs=float(fs), n_samples=int(arr.size), window=window, hop=hop,
-                      level_db=level_out, t1=t1_out, basis_id=basis.id)
+    return Trajectory(
+        fs=float(fs), n_samples=int(arr.size), window=window, hop=hop, level_db=level_out, t1=t1_out, basis_id=basis.id
+    )
 
 
 # --------------------------------------------------------------------------- quantisation
@@ -505,11 +513,12 @@ class Quantizer:
         bits: int = DEFAULT_BITS,
         level_range: tuple[float, float] | None = None,
         t1_range: tuple[float, float] | None = None,
-    ) -> "Quantizer":
+    ) -> Quantizer:
         """Ranges from the trajectory (rounded outward to whole units, >= 1 wide) unless given.
 
         The bounds are rounded to float32, as the file stores them.
         """
+
         def auto(values: NDArray[np.float64]) -> tuple[float, float]:
             lo, hi = math.floor(float(values.min())), math.ceil(float(values.max()))
             if hi - lo < 1:
@@ -532,7 +541,9 @@ class Quantizer:
         lv = np.asarray(level_db, dtype=np.float64)
         tv = np.asarray(t1, dtype=np.float64)
         silent = ~np.isfinite(lv)
-        lq = np.clip(np.round((np.where(silent, self.level_lo, lv) - self.level_lo) / self.level_step), 0, self.max_code - 1)
+        lq = np.clip(
+            np.round((np.where(silent, self.level_lo, lv) - self.level_lo) / self.level_step), 0, self.max_code - 1
+        )
         level_codes = np.where(silent, 0, lq.astype(np.int64) + 1)
         t1_codes = np.clip(np.round((tv - self.t1_lo) / self.t1_step), 0, self.max_code).astype(np.int64)
         return level_codes, t1_codes
@@ -556,14 +567,20 @@ class Quantizer:
         lv = trajectory.level_db
         loud = np.isfinite(lv)
         tol = 1e-6
-        return int(np.count_nonzero((loud & ((lv < self.level_lo - tol) | (lv > self.level_hi + tol)))
-                                    | (trajectory.t1 < self.t1_lo - tol) | (trajectory.t1 > self.t1_hi + tol)))
+        return int(
+            np.count_nonzero(
+                (loud & ((lv < self.level_lo - tol) | (lv > self.level_hi + tol)))
+                | (trajectory.t1 < self.t1_lo - tol)
+                | (trajectory.t1 > self.t1_hi + tol)
+            )
+        )
 
     def quantize(self, trajectory: Trajectory) -> Trajectory:
         """The trajectory as it decodes after quantisation."""
         level, t1 = self.decode(*self.encode(trajectory.level_db, trajectory.t1))
-        return Trajectory(trajectory.fs, trajectory.n_samples, trajectory.window, trajectory.hop,
-                          level, t1, trajectory.basis_id)
+        return Trajectory(
+            trajectory.fs, trajectory.n_samples, trajectory.window, trajectory.hop, level, t1, trajectory.basis_id
+        )
 
 
 # --------------------------------------------------------------------------- decoding schedule
@@ -624,9 +641,14 @@ def knob_schedule(
     if trajectory.n_frames == 0:
         return []
     levels = trajectory.level_db - offset_db
-    knobs = np.array([0.0 if not np.isfinite(v) else max(0.0, level_db_to_knob(float(v), ceiling_db=ceiling_db,
-                                                                                 range_db=range_db))
-                      for v in levels])
+    knobs = np.array(
+        [
+            0.0
+            if not np.isfinite(v)
+            else max(0.0, level_db_to_knob(float(v), ceiling_db=ceiling_db, range_db=range_db))
+            for v in levels
+        ]
+    )
     balances = np.asarray(basis.balance_from_t1(trajectory.t1), dtype=np.float64)
     centres = trajectory.centres_s()
     events = [KnobEvent(0, float(knobs[0]), float(balances[0]), 0.0)]

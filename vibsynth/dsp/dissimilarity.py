@@ -24,6 +24,7 @@ superimposes two such maps (translation, rotation/reflection, uniform scale).
 
 No I/O here: arrays in, arrays out.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -217,9 +218,7 @@ def classical_mds(
     return (coords, values) if return_eigenvalues else coords
 
 
-def procrustes(
-    reference: ArrayLike, moving: ArrayLike
-) -> tuple[NDArray[np.float64], float]:
+def procrustes(reference: ArrayLike, moving: ArrayLike) -> tuple[NDArray[np.float64], float]:
     """Superimpose ``moving`` on ``reference`` by translation, rotation/reflection and uniform scale.
 
     Parameters

@@ -31,9 +31,10 @@ an adjacent-centre ratio of ``100 ** (1/29) = 1.172``.
 
 No I/O here: arrays in, arrays out.
 """
+
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -79,9 +80,7 @@ MIN_RATE_HZ = 2400.0
 _CHUNK_BINS = 1 << 16
 
 
-def band_centres(
-    *, n_bands: int = N_BANDS, f_min: float = F_MIN_HZ, f_max: float = F_MAX_HZ
-) -> NDArray[np.float64]:
+def band_centres(*, n_bands: int = N_BANDS, f_min: float = F_MIN_HZ, f_max: float = F_MAX_HZ) -> NDArray[np.float64]:
     """Log-spaced band centre frequencies.
 
     Parameters
@@ -183,16 +182,13 @@ def validate_signal(x: ArrayLike, *, fs: float, min_seconds: float = 0.0) -> NDA
         raise ParameterError(f"expected a mono signal of shape (n_samples,), got shape {arr.shape}")
     if not np.isfinite(fs) or fs < MIN_RATE_HZ:
         raise ParameterError(
-            f"sample rate {fs:g} Hz is too low: the filter bank reaches 1000 Hz and needs at least "
-            f"{MIN_RATE_HZ:g} Hz"
+            f"sample rate {fs:g} Hz is too low: the filter bank reaches 1000 Hz and needs at least {MIN_RATE_HZ:g} Hz"
         )
     if not np.all(np.isfinite(arr)):
         bad = int(np.count_nonzero(~np.isfinite(arr)))
         raise ParameterError(f"signal has {bad} NaN or infinite samples")
     if arr.size < max(2, int(np.ceil(min_seconds * fs))):
-        raise ParameterError(
-            f"signal is too short: {arr.size / fs:.3f} s, need at least {min_seconds:g} s"
-        )
+        raise ParameterError(f"signal is too short: {arr.size / fs:.3f} s, need at least {min_seconds:g} s")
     return arr
 
 

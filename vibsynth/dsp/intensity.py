@@ -18,6 +18,7 @@ The **intensity knob** ``k`` (0..1) maps to a band level: ``k = 0`` is silence a
 ``k`` in (0, 1] spans ``range_db`` below ``ceiling_db``:
 ``level = ceiling_db - range_db * (1 - k)``.
 """
+
 from __future__ import annotations
 
 import math
@@ -226,9 +227,7 @@ def knob_to_gain(
     return 0.0 if level == -math.inf else 10.0 ** ((level - reference_db) / 20.0)
 
 
-def intensity_frames_db(
-    x: ArrayLike, *, fs: float, window_s: float = 0.1, hop_s: float = 0.05
-) -> NDArray[np.float64]:
+def intensity_frames_db(x: ArrayLike, *, fs: float, window_s: float = 0.1, hop_s: float = 0.05) -> NDArray[np.float64]:
     """Intensity level over time (the paper's windows: 100 ms, 50 ms overlap).
 
     Parameters
@@ -251,9 +250,7 @@ def intensity_frames_db(
         return 10.0 * np.log10(power)
 
 
-def non_stationarity_db(
-    x: ArrayLike, *, fs: float, window_s: float = 0.1, hop_s: float = 0.05
-) -> float:
+def non_stationarity_db(x: ArrayLike, *, fs: float, window_s: float = 0.1, hop_s: float = 0.05) -> float:
     """The paper's non-stationarity metric: std of the windowed intensity level.
 
     Parameters

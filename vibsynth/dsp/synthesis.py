@@ -21,6 +21,7 @@ The paper's procedure after McDermott & Simoncelli (2011): Gaussian noise is spl
 into the 30 sub-bands, each sub-band is scaled to its target power, the sub-bands
 are recombined, and this repeats until the measured powers match.
 """
+
 from __future__ import annotations
 
 import math
@@ -147,9 +148,7 @@ class SpectralShaper:
         power : ndarray, shape (..., n_bins)
         """
         g = np.asarray(weights, dtype=np.float64)
-        padded = np.concatenate(
-            [np.zeros(g.shape[:-1] + (1,)), g, np.zeros(g.shape[:-1] + (1,))], axis=-1
-        )
+        padded = np.concatenate([np.zeros(g.shape[:-1] + (1,)), g, np.zeros(g.shape[:-1] + (1,))], axis=-1)
         idx, frac, inside = self._bump_index()
         left = np.cos(0.5 * np.pi * frac) ** 2
         right = 1.0 - left
@@ -231,7 +230,7 @@ class SpectralShaper:
         """
         return self.power_envelope(self.solve_weights(band_db, level_db=level_db))
 
-    def reachable_t1(self, basis: "Basis") -> tuple[tuple[float, float], tuple[float, float]]:
+    def reachable_t1(self, basis: Basis) -> tuple[tuple[float, float], tuple[float, float]]:
         """The lowest and highest t1 a signal shaped along ``M + t V1`` can *measure*.
 
         Far out, ``M + t V1`` has slopes steeper than the filter bank can show (a
@@ -245,6 +244,7 @@ class SpectralShaper:
         """
         key = basis.id
         if key not in self._reachable:
+
             def measured(requested: float) -> float:
                 w = self.solve_weights(basis.mean_db + requested * basis.v1, level_db=0.0)
                 return float(basis.scores(self.weights_band_db(w))[0])
@@ -252,7 +252,9 @@ class SpectralShaper:
             sides = []
             for sign, span in ((-1.0, -basis.t1_from_balance(-1.0)), (1.0, basis.t1_from_balance(1.0))):
                 res = minimize_scalar(
-                    lambda t: -sign * measured(sign * t), bounds=(0.0, 12.0 * float(span)), method="bounded",
+                    lambda t: -sign * measured(sign * t),
+                    bounds=(0.0, 12.0 * float(span)),
+                    method="bounded",
                     options={"xatol": 1e-3 * float(span)},
                 )
                 sides.append((sign * float(res.x), measured(sign * float(res.x))))
@@ -261,7 +263,7 @@ class SpectralShaper:
 
     def solve_balance(
         self,
-        basis: "Basis",
+        basis: Basis,
         balance: float,
         *,
         level_db: float,
@@ -490,7 +492,7 @@ def synthesize_iterative(
     spectrum = np.fft.rfft(rng.standard_normal(n_samples))
     spectrum[~support] = 0.0
     iterations = 0
-    for iterations in range(1, max_iterations + 1):
+    for iterations in range(1, max_iterations + 1):  # noqa: B007 - read after the loop
         signal = np.fft.irfft(spectrum, n=n_samples)
         freqs_b, power = bin_powers(signal, fs=fs)
         measured = band_powers_from_bin_powers(freqs_b, power)

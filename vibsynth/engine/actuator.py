@@ -13,11 +13,12 @@ response is held at the first/last value. With no points the response is flat
 This module does no I/O: profiles' YAML files are read elsewhere and arrive here
 as a list of points.
 """
+
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -48,7 +49,7 @@ class ActuatorResponse:
     @classmethod
     def from_points(
         cls, points: Iterable[Sequence[float]] | None, *, max_boost_db: float = DEFAULT_MAX_BOOST_DB
-    ) -> "ActuatorResponse":
+    ) -> ActuatorResponse:
         """Validate points from a config file or profile.
 
         Parameters

@@ -39,6 +39,7 @@ inside). Writes are atomic (temporary file + rename). A file that is unreadable,
 truncated or whose key or shapes do not match is rebuilt with a warning, never
 fatal; a cache folder that cannot be written only costs a warning.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -47,9 +48,10 @@ import logging
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO, Callable
+from typing import BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -261,8 +263,9 @@ def _write_cache(path: Path, bank: NoiseBank) -> None:
     from vibsynth.formats.files import atomic_write
 
     def write(handle: BinaryIO) -> None:
-        np.savez(handle, signals=bank.signals, balances=bank.balances, peaks=bank.peaks,
-                 key=np.array(json.dumps(bank.key)))
+        np.savez(
+            handle, signals=bank.signals, balances=bank.balances, peaks=bank.peaks, key=np.array(json.dumps(bank.key))
+        )
 
     atomic_write(path, write)
 

@@ -14,10 +14,11 @@ channel indices. ``at_frame=None`` means "as soon as possible" (the next block);
 otherwise the command applies at that stream position (frames since the stream
 started; the engine applies it at the exact sample within a block).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, Union
+from typing import Literal
 
 __all__ = [
     "KnobName",
@@ -80,4 +81,4 @@ class Panic:
     at_frame: None = None
 
 
-Command = Union[SetKnob, SetGlide, SetMute, Panic]
+Command = SetKnob | SetGlide | SetMute | Panic

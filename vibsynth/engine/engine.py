@@ -51,6 +51,7 @@ Python objects: the audio thread does not need the GIL, allocates nothing, takes
 lock and never logs. Requests larger than ``max_block`` are rendered in pieces (so
 commands are taken at the same points whatever the caller's block size).
 """
+
 from __future__ import annotations
 
 import math
@@ -101,7 +102,7 @@ class EngineStats:
         Device errors the output recovered from.
     """
 
-    def __init__(self, core: "_core.Core") -> None:
+    def __init__(self, core: _core.Core) -> None:
         self._core = core
         self.output_errors = 0
 
@@ -173,8 +174,13 @@ class Engine:
     ) -> None:
         if int(channels) != channels or channels < 1 or channels > 64:
             raise ParameterError(f"channels must be an integer in 1..64, got {channels!r}")
-        for name, value in (("ceiling_db", ceiling_db), ("range_db", range_db), ("glide_s", glide_s),
-                            ("mute_fade_s", mute_fade_s), ("limiter_ceiling", limiter_ceiling)):
+        for name, value in (
+            ("ceiling_db", ceiling_db),
+            ("range_db", range_db),
+            ("glide_s", glide_s),
+            ("mute_fade_s", mute_fade_s),
+            ("limiter_ceiling", limiter_ceiling),
+        ):
             if not math.isfinite(value):
                 raise ParameterError(f"{name} must be finite, got {value!r}")
         if range_db <= 0:
@@ -203,10 +209,22 @@ class Engine:
         self._signals = np.ascontiguousarray(bank.signals, dtype=np.float32)
         self._peaks = np.ascontiguousarray(bank.peaks, dtype=np.float64)
         self._core = _core.Core(
-            self._signals, self._peaks, float(bank.balances[0]), float(bank.balances[-1]),
-            [int(o) for o in bank.channel_offsets(self.channels)], self.fs, self.ceiling_db, self.range_db,
-            float(glide_s), self.mute_fade_s, self.limiter_ceiling, float(initial_intensity),
-            float(initial_balance), self.max_block, RING_CAPACITY, self.schedule_capacity,
+            self._signals,
+            self._peaks,
+            float(bank.balances[0]),
+            float(bank.balances[-1]),
+            [int(o) for o in bank.channel_offsets(self.channels)],
+            self.fs,
+            self.ceiling_db,
+            self.range_db,
+            float(glide_s),
+            self.mute_fade_s,
+            self.limiter_ceiling,
+            float(initial_intensity),
+            float(initial_balance),
+            self.max_block,
+            RING_CAPACITY,
+            self.schedule_capacity,
         )
         self.stats = EngineStats(self._core)
 
@@ -222,8 +240,12 @@ class Engine:
             The hand-off ring is full (the audio thread has stopped taking commands).
         """
         if isinstance(command, SetKnob):
-            args = (_core.CMD_KNOB, 0 if command.name == "intensity" else 1, float(command.value),
-                    math.nan if command.glide_s is None else float(command.glide_s))
+            args = (
+                _core.CMD_KNOB,
+                0 if command.name == "intensity" else 1,
+                float(command.value),
+                math.nan if command.glide_s is None else float(command.glide_s),
+            )
         elif isinstance(command, SetGlide):
             args = (_core.CMD_GLIDE, 0, float(command.seconds), math.nan)
         elif isinstance(command, SetMute):

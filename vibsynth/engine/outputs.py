@@ -23,15 +23,17 @@ A small interface (like mido's ports) so tests and the service swap them freely:
 without PortAudio can still use the other backends; its ``OSError`` becomes a
 :class:`~vibsynth.errors.DeviceError`.
 """
+
 from __future__ import annotations
 
 import logging
 import threading
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -176,8 +178,7 @@ def resolve_device(sd: ModuleType, device: str | int | None, host_api: str | int
     devices = sd.query_devices()
     api = _host_api_index(sd, host_api)
     outputs = [
-        i for i, d in enumerate(devices)
-        if d["max_output_channels"] > 0 and (api is None or d["hostapi"] == api)
+        i for i, d in enumerate(devices) if d["max_output_channels"] > 0 and (api is None or d["hostapi"] == api)
     ]
     where = f" on host API {sd.query_hostapis(api)['name']!r}" if api is not None else ""
     if not outputs:
@@ -299,8 +300,7 @@ class SoundDeviceOutput(OutputBackend):
         self._lock = threading.Lock()
         self._reported_errors = 0
         self.last_error: BaseException | None = None
-        self.supervisor = StreamSupervisor(self, heartbeat_timeout_s=heartbeat_timeout_s, backoff=backoff,
-                                           clock=clock)
+        self.supervisor = StreamSupervisor(self, heartbeat_timeout_s=heartbeat_timeout_s, backoff=backoff, clock=clock)
 
     def _finished(self) -> None:
         if self._want_running:
@@ -336,9 +336,15 @@ class SoundDeviceOutput(OutputBackend):
         callback, userdata = self.engine.callback_addresses()
         self.engine.set_output_map(self.device_channels, self.channel_map)
         return sd._StreamBase(
-            kind="output", samplerate=self.engine.fs, blocksize=self.block_size, device=index,
-            channels=self.device_channels, dtype="float32", latency=self.latency,
-            callback=sd._ffi.cast("PaStreamCallback *", callback), userdata=sd._ffi.cast("void *", userdata),
+            kind="output",
+            samplerate=self.engine.fs,
+            blocksize=self.block_size,
+            device=index,
+            channels=self.device_channels,
+            dtype="float32",
+            latency=self.latency,
+            callback=sd._ffi.cast("PaStreamCallback *", callback),
+            userdata=sd._ffi.cast("void *", userdata),
             finished_callback=self._finished,
         )
 
@@ -512,8 +518,10 @@ class SoundDeviceOutput(OutputBackend):
     def describe(self) -> str:
         latency = getattr(self._stream, "latency", None)
         lat = f", latency {1000 * latency:.1f} ms" if isinstance(latency, float) else ""
-        return (f"sounddevice: {self._device_label()}, {self.engine.fs:g} Hz, block {self.block_size}{lat}, "
-                f"outputs {[c + 1 for c in self.channel_map]}")
+        return (
+            f"sounddevice: {self._device_label()}, {self.engine.fs:g} Hz, block {self.block_size}{lat}, "
+            f"outputs {[c + 1 for c in self.channel_map]}"
+        )
 
 
 # ---------------------------------------------------------------------- null
@@ -594,7 +602,7 @@ class WavOutput(OutputBackend):
     def _run(self) -> None:
         while self._done < self.frames and not self._stop.is_set():
             n = min(self.block_size, self.frames - self._done)
-            self.engine.render_into(self._data[self._done:self._done + n])
+            self.engine.render_into(self._data[self._done : self._done + n])
             self._done += n
             self.stats.callbacks += 1
         self._write()
@@ -623,4 +631,6 @@ class WavOutput(OutputBackend):
         return self._thread is not None and self._thread.is_alive()
 
     def describe(self) -> str:
-        return f"wav file {self.path} ({self.frames / self.engine.fs:g} s at {self.engine.fs:g} Hz, faster than real time)"
+        return (
+            f"wav file {self.path} ({self.frames / self.engine.fs:g} s at {self.engine.fs:g} Hz, faster than real time)"
+        )

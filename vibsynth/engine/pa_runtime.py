@@ -16,6 +16,7 @@ loaded for good (unloading it makes libjack call into freed code) and costs a fe
 KB per device loss. At exit a dirty instance is not terminated either: sounddevice's
 ``atexit`` hook is disarmed instead.
 """
+
 from __future__ import annotations
 
 import logging
@@ -23,9 +24,10 @@ import os
 import shutil
 import tempfile
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Callable
+from typing import Any
 
 from vibsynth.engine.supervisor import HungCallError, call_with_timeout
 from vibsynth.errors import DeviceError
@@ -96,8 +98,12 @@ def load_library_copy(sd: ModuleType) -> Any:
         No usable copy could be made or loaded (no writable, executable directory).
     """
     source = _loaded_library_path(sd)
-    places = [tempfile.gettempdir(), os.environ.get("XDG_RUNTIME_DIR", ""),
-              str(Path.home() / ".cache" / "vibsynth"), "/dev/shm"]
+    places = [
+        tempfile.gettempdir(),
+        os.environ.get("XDG_RUNTIME_DIR", ""),
+        str(Path.home() / ".cache" / "vibsynth"),
+        "/dev/shm",
+    ]
     errors = []
     for place in filter(None, places):
         try:

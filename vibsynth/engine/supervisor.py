@@ -18,6 +18,7 @@ return in time, so the caller (the supervisor, or the main thread at exit) never
 :class:`ExitGuard` makes a process exit on time even when clean-up hangs: armed on
 SIGTERM/SIGINT, it flushes the logs and calls ``os._exit(0)`` after a deadline.
 """
+
 from __future__ import annotations
 
 import logging
@@ -25,7 +26,8 @@ import os
 import sys
 import threading
 import time
-from typing import Any, Callable, Protocol, TypeVar
+from collections.abc import Callable
+from typing import Any, Protocol, TypeVar
 
 from vibsynth.errors import DeviceError
 
@@ -270,8 +272,9 @@ class StreamSupervisor:
         if previous == RECOVERING and self.lost_at is not None:
             self.recovered_after_s = now - self.lost_at
             self.recoveries += 1
-            log.warning("audio device back: streaming again after %.2f s (%d attempt(s))",
-                        self.recovered_after_s, self.attempts)
+            log.warning(
+                "audio device back: streaming again after %.2f s (%d attempt(s))", self.recovered_after_s, self.attempts
+            )
         self.reason, self.last_error, self.attempts = "", "", 0
 
     def _lost(self, reason: str, now: float) -> None:
@@ -280,8 +283,12 @@ class StreamSupervisor:
         if first:
             self.reason, self.lost_at, self.attempts = reason, now, 0
             self.losses += 1
-            log.warning("audio device lost: %s; retrying every %g-%g s (OSC/MIDI keep working)",
-                        reason, self.backoff.first, self.backoff.maximum)
+            log.warning(
+                "audio device lost: %s; retrying every %g-%g s (OSC/MIDI keep working)",
+                reason,
+                self.backoff.first,
+                self.backoff.maximum,
+            )
         else:
             self.last_error = reason
             log.info("audio retry %d failed: %s", self.attempts, reason)
@@ -385,6 +392,7 @@ def flush_output(timeout_s: float = FLUSH_TIMEOUT_S) -> None:
     Flushing can block too (a full pipe, a lock held by a stuck thread), so it runs in
     a helper thread that is abandoned after the timeout.
     """
+
     def flush() -> None:
         try:
             for handler in logging.getLogger().handlers:

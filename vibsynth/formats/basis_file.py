@@ -1,5 +1,5 @@
-"""Basis files: the spectral basis (M, V1..V8) as YAML, and the basis shipped with the package.
-"""
+"""Basis files: the spectral basis (M, V1..V8) as YAML, and the basis shipped with the package."""
+
 from __future__ import annotations
 
 import os

@@ -6,14 +6,16 @@
   fsync, ``os.replace``, fsync of the folder. A crash leaves the old file or the new one,
   never part of one. New files get mode 0644 (the umask is respected).
 """
+
 from __future__ import annotations
 
 import errno
 import os
 import secrets
 import stat
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, BinaryIO, Callable, Union
+from typing import TYPE_CHECKING, BinaryIO
 
 from vibsynth.errors import InputError
 
@@ -21,7 +23,7 @@ if TYPE_CHECKING:  # the DSP layer and scipy load lazily: config reads YAML thro
     pass
 
 #: What :func:`atomic_write` accepts: bytes, text (UTF-8) or ``writer(binary_file)``.
-WriteData = Union[bytes, bytearray, memoryview, str, Callable[[BinaryIO], object]]
+WriteData = bytes | bytearray | memoryview | str | Callable[[BinaryIO], object]
 
 _TEMP_ATTEMPTS = 100
 
@@ -192,8 +194,13 @@ def _read_capped(path: Path, *, max_bytes: int, error: type[Exception], what: st
     return data
 
 
-def read_text(path: str | os.PathLike[str], *, error: type[Exception] = InputError,
-              max_bytes: int = MAX_YAML_BYTES, what: str = "a text file") -> str:
+def read_text(
+    path: str | os.PathLike[str],
+    *,
+    error: type[Exception] = InputError,
+    max_bytes: int = MAX_YAML_BYTES,
+    what: str = "a text file",
+) -> str:
     """Read a UTF-8 text file of at most ``max_bytes``; every reason it cannot be read becomes one
     ``error`` naming the file.
 

@@ -1,5 +1,5 @@
-"""PSD tables: a CSV of power spectral densities, one column per texture (basis fitting input).
-"""
+"""PSD tables: a CSV of power spectral densities, one column per texture (basis fitting input)."""
+
 from __future__ import annotations
 
 import csv
@@ -16,6 +16,7 @@ from vibsynth.errors import InputError
 
 if TYPE_CHECKING:  # the DSP layer and scipy load lazily: config reads YAML through here
     pass
+
 
 @dataclass(frozen=True)
 class PsdTable:

@@ -3,13 +3,15 @@
 Every reader validates at the edge and raises :class:`~vibsynth.errors.InputError` with a
 message naming the file and the problem.
 """
+
 from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -133,7 +135,9 @@ def read_recording(path: str | os.PathLike[str], *, fs: float | None = None, cha
     return Recording(samples=samples, fs=rate, path=p)
 
 
-def write_wav(path: str | os.PathLike[str], samples: NDArray[Any], fs: float, *, sample_format: str = "float32") -> None:
+def write_wav(
+    path: str | os.PathLike[str], samples: NDArray[Any], fs: float, *, sample_format: str = "float32"
+) -> None:
     """Write a WAV file atomically.
 
     Parameters

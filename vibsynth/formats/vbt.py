@@ -40,6 +40,7 @@ Decoding (:func:`render`) schedules the trajectory as ``SetKnob`` commands at
 exact frames, with glides, on the real-time :class:`~vibsynth.engine.engine.Engine`
 and renders it: the same code that plays live.
 """
+
 from __future__ import annotations
 
 import math
@@ -140,10 +141,22 @@ def encode_bytes(trajectory: Trajectory, quantizer: Quantizer) -> bytes:
         n_records = n
     payload = _pack_bits(np.asarray(values, dtype=np.int64), np.asarray(widths, dtype=np.int64))
     header = HEADER.pack(
-        MAGIC, VERSION, bits, flags, float(trajectory.fs), trajectory.basis_id.encode("ascii"),
-        trajectory.window, trajectory.hop, trajectory.n_samples,
-        quantizer.level_lo, quantizer.level_hi, quantizer.t1_lo, quantizer.t1_hi,
-        n, n_records, len(payload),
+        MAGIC,
+        VERSION,
+        bits,
+        flags,
+        float(trajectory.fs),
+        trajectory.basis_id.encode("ascii"),
+        trajectory.window,
+        trajectory.hop,
+        trajectory.n_samples,
+        quantizer.level_lo,
+        quantizer.level_hi,
+        quantizer.t1_lo,
+        quantizer.t1_hi,
+        n,
+        n_records,
+        len(payload),
     )
     body = header + payload
     return body + _CRC.pack(zlib.crc32(body) & 0xFFFFFFFF)
@@ -183,8 +196,24 @@ def decode_bytes(data: bytes, *, name: str = "file") -> Decoded:
         raise CodecError(f"{name}: not a vibsynth trajectory file (bad magic)")
     if len(data) < n_min:
         raise CodecError(f"{name}: truncated: {len(data)} bytes, a header alone takes {n_min}")
-    (magic, version, bits, flags, fs, basis_id, window, hop, n_samples,
-     l_lo, l_hi, t_lo, t_hi, n_frames, n_records, payload_len) = HEADER.unpack_from(data)
+    (
+        magic,
+        version,
+        bits,
+        flags,
+        fs,
+        basis_id,
+        window,
+        hop,
+        n_samples,
+        l_lo,
+        l_hi,
+        t_lo,
+        t_hi,
+        n_frames,
+        n_records,
+        payload_len,
+    ) = HEADER.unpack_from(data)
     if version != VERSION:
         raise CodecError(f"{name}: format version {version} is not supported (this vibsynth reads version {VERSION})")
     expected = HEADER.size + payload_len + _CRC.size

@@ -4,6 +4,7 @@
 (``*name``: a 381-byte "billion laughs" file expands to gigabytes) and nesting deeper than
 :data:`~vibsynth.formats.files.MAX_YAML_DEPTH`, naming ``file:line``.
 """
+
 from __future__ import annotations
 
 import os
@@ -21,6 +22,7 @@ from vibsynth.formats.files import MAX_YAML_BYTES, MAX_YAML_DEPTH, read_text, si
 
 if TYPE_CHECKING:  # the DSP layer and scipy load lazily: config reads YAML through here
     pass
+
 
 class _Refused(Exception):
     """Internal: the document breaks a rule of :func:`load_yaml` (turned into the caller's error)."""
@@ -42,12 +44,16 @@ class _GuardedComposer(Composer):
         if isinstance(event, yaml.AliasEvent):
             line = self._anchor_lines.get(event.anchor)
             where = f" (anchor '&{event.anchor}' on line {line})" if line else ""
-            raise _Refused(f"{event.start_mark.line + 1}:{event.start_mark.column + 1}: YAML alias "
-                           f"'*{event.anchor}'{where}: aliases are not allowed in {self._what} (they can "
-                           "expand a small file into gigabytes); write the value out instead")
+            raise _Refused(
+                f"{event.start_mark.line + 1}:{event.start_mark.column + 1}: YAML alias "
+                f"'*{event.anchor}'{where}: aliases are not allowed in {self._what} (they can "
+                "expand a small file into gigabytes); write the value out instead"
+            )
         if self._depth >= self._max_depth:
-            raise _Refused(f"{event.start_mark.line + 1}:{event.start_mark.column + 1}: nested more than "
-                           f"{self._max_depth} levels deep (not allowed in {self._what})")
+            raise _Refused(
+                f"{event.start_mark.line + 1}:{event.start_mark.column + 1}: nested more than "
+                f"{self._max_depth} levels deep (not allowed in {self._what})"
+            )
         anchor = getattr(event, "anchor", None)
         if anchor is not None:
             self._anchor_lines.setdefault(anchor, event.start_mark.line + 1)

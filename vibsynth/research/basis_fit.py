@@ -4,11 +4,12 @@ The default basis shipped in ``vibsynth/data/default_basis.yaml`` is made by
 :func:`fit_default_basis` from ``shared/datasets/hatt-psd/psd.csv.gz``
 (regenerate with ``python scripts/fit_default_basis.py``).
 """
+
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -24,8 +25,8 @@ __all__ = ["HATT_CITATION", "fit_from_psd_table", "fit_from_recordings", "fit_de
 Progress = Callable[[int, int, str], None]
 
 HATT_CITATION = (
-    "H. Culbertson, J. J. Lopez Delgado, K. J. Kuchenbecker, \"One hundred data-driven haptic texture "
-    "models and open-source methods for rendering on 3D objects\", IEEE Haptics Symposium 2014."
+    'H. Culbertson, J. J. Lopez Delgado, K. J. Kuchenbecker, "One hundred data-driven haptic texture '
+    'models and open-source methods for rendering on 3D objects", IEEE Haptics Symposium 2014.'
 )
 HATT_TERMS = "The Penn Haptic Texture Toolkit's terms allow non-profit research use; cite the paper above."
 

@@ -29,15 +29,17 @@ Decisions
 scikit-learn is an optional dependency (``pip install 'vibsynth[research]'``) and
 is imported only inside the functions that need it.
 """
+
 from __future__ import annotations
 
 import csv
 import math
 import os
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -470,7 +472,7 @@ def fit_dissimilarity_weights(
         subsets += [("first", i, list(range(i + 1))) for i in range(1, k - 1)]
     r2: dict[tuple[str, int], list[float]] = {(name, j): [] for name, j, _ in subsets}
     weights_splits = []
-    for split in range(n_splits):
+    for _split in range(n_splits):
         order = rng.permutation(n)
         test, train = order[:n_test], order[n_test:]
         split_seed = int(rng.integers(2**31 - 1))
@@ -486,7 +488,13 @@ def fit_dissimilarity_weights(
     def stats(name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         rows = []
         for j in range(k):
-            key = ("all", 0) if (name == "first" and j == k - 1) else ("single", 0) if (name == "first" and j == 0) else (name, j)
+            key = (
+                ("all", 0)
+                if (name == "first" and j == k - 1)
+                else ("single", 0)
+                if (name == "first" and j == 0)
+                else (name, j)
+            )
             rows.append(np.asarray(r2[key]))
         arr = np.asarray(rows)
         return np.nanmean(arr, axis=1), np.nanstd(arr, axis=1)

@@ -8,12 +8,14 @@
 Every function writes a PNG (atomically) and returns its path. matplotlib is an
 optional dependency (``pip install 'vibsynth[research]'``).
 """
+
 from __future__ import annotations
 
 import io
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -24,8 +26,16 @@ from vibsynth.research.dissim import MissingDependencyError
 __all__ = ["plot_basis", "plot_spectrum", "plot_presets", "plot_mds"]
 
 _DPI = 120
-_RC = {"font.size": 11, "axes.titlesize": 12, "axes.labelsize": 11, "legend.fontsize": 9,
-       "xtick.labelsize": 10, "ytick.labelsize": 10, "axes.grid": True, "grid.alpha": 0.3}
+_RC = {
+    "font.size": 11,
+    "axes.titlesize": 12,
+    "axes.labelsize": 11,
+    "legend.fontsize": 9,
+    "xtick.labelsize": 10,
+    "ytick.labelsize": 10,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+}
 
 
 def _pyplot() -> Any:
@@ -78,8 +88,15 @@ def plot_basis(basis: Basis, path: str | os.PathLike[str]) -> Path:
         ax.axhline(0, color="0.6", lw=0.8)
         ax.plot(f, basis.components[i], "-o", ms=3, color="C0" if i == 0 else "C1")
         ax.set_ylabel(f"V{i + 1}")
-        ax.text(0.99, 0.85, f"{100 * basis.explained_variance_ratio[i]:.1f} % var.", transform=ax.transAxes,
-                ha="right", va="top", fontsize=9)
+        ax.text(
+            0.99,
+            0.85,
+            f"{100 * basis.explained_variance_ratio[i]:.1f} % var.",
+            transform=ax.transAxes,
+            ha="right",
+            va="top",
+            fontsize=9,
+        )
     _freq_axis(axes[-1], basis)
     fig.text(0.005, 0.4, "component weight (dB per unit score)", rotation=90, fontsize=10)
     return _save(fig, path)
@@ -113,8 +130,9 @@ def plot_spectrum(
         scores = basis.scores(band_db)
         f = basis.centres_hz
         ax.plot(f, measured, "k-", lw=2.2, label="measured")
-        ax.plot(f, basis.reconstruct(scores, components=slice(0, 1)), "C3--", lw=1.8,
-                label=f"S1 (t1 = {scores[0]:+.1f})")
+        ax.plot(
+            f, basis.reconstruct(scores, components=slice(0, 1)), "C3--", lw=1.8, label=f"S1 (t1 = {scores[0]:+.1f})"
+        )
         ax.plot(f, basis.reconstruct(scores, components=slice(0, None)), "C0:", lw=1.8, label="S1:8")
         if variants:
             ax.plot(f, basis.reconstruct(scores, components=slice(1, None)), "C2-.", lw=1.2, label="S2:8")
@@ -145,8 +163,9 @@ def plot_presets(presets: Sequence[tuple[str, float, float]], basis: Basis, path
     order = np.argsort(bal)
     y = np.arange(len(presets))
     ax.axvline(0, color="0.6", lw=0.8)
-    ax.scatter(bal[order], y, s=30 + 170 * np.clip(inten[order], 0, 1), c=bal[order], cmap="coolwarm",
-               edgecolors="k", zorder=3)
+    ax.scatter(
+        bal[order], y, s=30 + 170 * np.clip(inten[order], 0, 1), c=bal[order], cmap="coolwarm", edgecolors="k", zorder=3
+    )
     for yi, i in zip(y, order):
         ax.annotate(names[i], (bal[i], yi), xytext=(8, 0), textcoords="offset points", va="center", fontsize=9)
     ax.set_yticks([])
@@ -186,8 +205,9 @@ def plot_mds(mds: Any, path: str | os.PathLike[str], *, title: str = "") -> Path
     scale = float(np.max(np.abs(np.concatenate([rated, pred])))) or 1.0
     r = mds.component_r[0]
     if np.all(np.isfinite(r)):
-        ax.annotate("", xy=(r[0] * scale, r[1] * scale), xytext=(0, 0),
-                    arrowprops=dict(arrowstyle="->", color="k", lw=1.8))
+        ax.annotate(
+            "", xy=(r[0] * scale, r[1] * scale), xytext=(0, 0), arrowprops=dict(arrowstyle="->", color="k", lw=1.8)
+        )
         ax.text(r[0] * scale, r[1] * scale, f"  V1 (r = {r[0]:+.2f}, {r[1]:+.2f})", fontsize=9)
         theta = np.linspace(0, 2 * np.pi, 200)
         ax.plot(scale * np.cos(theta), scale * np.sin(theta), color="0.8", lw=0.8, ls="--")

@@ -1,5 +1,5 @@
-"""Actuator profiles: named frequency responses (shipped and user files) a config can name.
-"""
+"""Actuator profiles: named frequency responses (shipped and user files) a config can name."""
+
 from __future__ import annotations
 
 from importlib import resources
@@ -50,8 +50,10 @@ def load_actuator_profile(name: str) -> dict[str, Any]:
     """
     profiles = actuator_profiles()
     if name not in profiles:
-        raise ConfigError(f"unknown actuator profile {name!r}{_close(name, list(profiles))} "
-                          f"(available: {', '.join(sorted(profiles))})")
+        raise ConfigError(
+            f"unknown actuator profile {name!r}{_close(name, list(profiles))} "
+            f"(available: {', '.join(sorted(profiles))})"
+        )
     doc = read_yaml_file(profiles[name], what="an actuator profile")
     if not isinstance(doc.data, dict):
         raise ConfigError(f"{doc.origin}: an actuator profile must be a mapping with name, description, response")
@@ -65,10 +67,17 @@ def load_actuator_profile(name: str) -> dict[str, Any]:
     if "response" not in doc.data:
         raise ConfigError(f"{doc.origin}: missing key 'response' ([[Hz, dB], ...])")
     if doc.data.get("name", name) != name:
-        raise ConfigError(f"{doc.where(('name',))}: name = {doc.data['name']!r} does not match the file name "
-                          f"{name}.yaml")
-    return {"name": name, "description": doc.data.get("description", ""), "example": doc.data.get("example", False),
-            "source": doc.data.get("source", ""), "response": doc.data["response"], "file": doc.origin}
+        raise ConfigError(
+            f"{doc.where(('name',))}: name = {doc.data['name']!r} does not match the file name {name}.yaml"
+        )
+    return {
+        "name": name,
+        "description": doc.data.get("description", ""),
+        "example": doc.data.get("example", False),
+        "source": doc.data.get("source", ""),
+        "response": doc.data["response"],
+        "file": doc.origin,
+    }
 
 
 def resolve_actuator_response(config: Config) -> list[tuple[float, float]]:

@@ -2,10 +2,11 @@
 
 Parsed once at start-up from the config; the compiled receive loop checks the networks per datagram.
 """
+
 from __future__ import annotations
 
 import ipaddress
-from typing import Iterable
+from collections.abc import Iterable
 
 from vibsynth.errors import ConfigError
 
@@ -24,8 +25,10 @@ def _entry_networks(entry: object) -> tuple[Network, ...] | str:
     try:
         net = ipaddress.ip_network(entry, strict=False)
     except ValueError:
-        return ("is not an IP address or network (e.g. 192.168.1.0/24, 10.0.0.0/8, ::1) or 'localhost'; "
-                "host names are not accepted")
+        return (
+            "is not an IP address or network (e.g. 192.168.1.0/24, 10.0.0.0/8, ::1) or 'localhost'; "
+            "host names are not accepted"
+        )
     mapped = net.network_address.ipv4_mapped if isinstance(net, ipaddress.IPv6Network) else None
     if mapped is not None and net.prefixlen >= 96:  # ::ffff:10.0.0.0/104 is 10.0.0.0/8
         return (ipaddress.ip_network(f"{mapped}/{net.prefixlen - 96}"),)

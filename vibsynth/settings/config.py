@@ -23,16 +23,18 @@ API contract used by the rest of the package:
 * ``Config.sources``: dotted key -> where its value came from
 * ``resolve_actuator_response(config) -> list[(hz, db)]``
 """
+
 from __future__ import annotations
 
 import copy
 import math
 import os
 import re
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from vibsynth.errors import ConfigError
 from vibsynth.settings.yamldoc import Path_, YamlDocument, parse_yaml, read_yaml_file, short_repr, yaml_value
@@ -82,8 +84,16 @@ class Spec:
     doc: str = ""
 
 
-def number(low: float | None = None, high: float | None = None, *, integer: bool = False, nullable: bool = False,
-           low_open: bool = False, unit: str = "", doc: str = "") -> Spec:
+def number(
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    integer: bool = False,
+    nullable: bool = False,
+    low_open: bool = False,
+    unit: str = "",
+    doc: str = "",
+) -> Spec:
     """A number (int or float; bool refused) within [low, high] (``low_open``: (low, high])."""
     kind = "an integer" if integer else "a number"
     lo = "(" if low_open else "["
@@ -149,11 +159,14 @@ def any_of(*specs: Spec, doc: str = "") -> Spec:
     return Spec(allowed, check, doc)
 
 
-def _points(x_name: str, x_low: float, x_low_open: bool, y_low: float, y_high: float, min_points: int,
-            nullable: bool, doc: str) -> Spec:
+def _points(
+    x_name: str, x_low: float, x_low_open: bool, y_low: float, y_high: float, min_points: int, nullable: bool, doc: str
+) -> Spec:
     lo = "(" if x_low_open else "["
-    allowed = (f"a list of at least {min_points} pairs [{x_name}, value] with {x_name} in {lo}{x_low:g}, inf) "
-               f"strictly increasing and value in [{y_low:g}, {y_high:g}]" + (", or null" if nullable else ""))
+    allowed = (
+        f"a list of at least {min_points} pairs [{x_name}, value] with {x_name} in {lo}{x_low:g}, inf) "
+        f"strictly increasing and value in [{y_low:g}, {y_high:g}]" + (", or null" if nullable else "")
+    )
 
     def check(value: Any) -> str | None:
         if value is None:
@@ -212,8 +225,11 @@ def _midi_channel_map(value: Any) -> str | None:
             return f"key {key!r} is not a MIDI channel 1..16"
         if target == "all":
             continue
-        if not (isinstance(target, list) and target
-                and all(isinstance(t, int) and not isinstance(t, bool) and t >= 1 for t in target)):
+        if not (
+            isinstance(target, list)
+            and target
+            and all(isinstance(t, int) and not isinstance(t, bool) and t >= 1 for t in target)
+        ):
             return f"channel {key}: {target!r} must be 'all' or a list of actuator channels (1-based)"
     return None
 
@@ -251,8 +267,12 @@ def _midi_bindings(value: Any) -> str | None:
                     return f"item {i}: {problem}"
                 continue
             if key == "range":
-                if not (isinstance(val, list) and len(val) == 2 and all(_is_number(v) and math.isfinite(v) for v in val)
-                        and val[0] < val[1]):
+                if not (
+                    isinstance(val, list)
+                    and len(val) == 2
+                    and all(_is_number(v) and math.isfinite(v) for v in val)
+                    and val[0] < val[1]
+                ):
                     return f"item {i}: range {val!r} must be [low, high] with finite low < high"
                 continue
             if key not in _BINDING_KEYS:
@@ -286,21 +306,21 @@ SCHEMA: dict[str, Spec] = {
     "version": number(1, 1, integer=True, doc="config schema version"),
     # audio
     "audio.backend": choice("auto", "sounddevice", "null", "wav"),
-    "audio.device": any_of(string(nullable=True, what="a device name substring"),
-                           number(0, None, integer=True, doc="device index")),
+    "audio.device": any_of(
+        string(nullable=True, what="a device name substring"), number(0, None, integer=True, doc="device index")
+    ),
     "audio.host_api": string(nullable=True, what="a host API name"),
     "audio.rate": number(2400, 384000, integer=True, unit="Hz"),
     "audio.block_size": number(16, 8192, integer=True, unit="frames"),
     "audio.latency": any_of(choice("low", "high"), number(0, 2, low_open=True, unit="s")),
     "audio.channels": number(1, 64, integer=True),
-    "audio.channel_map": custom("null or a list of distinct device outputs (1-based), one per channel",
-                                _channel_list),
+    "audio.channel_map": custom("null or a list of distinct device outputs (1-based), one per channel", _channel_list),
     # bank
     "bank.balance_min": number(-10, 0, unit="(knob units)"),
     "bank.balance_max": number(0, 10, unit="(knob units)"),
     "bank.levels": number(2, 1001, integer=True),
     "bank.loop_seconds": number(0.5, 60, unit="s"),
-    "bank.cache_dir": string(nullable=True, what="a folder path (\"\" disables the cache)"),
+    "bank.cache_dir": string(nullable=True, what='a folder path ("" disables the cache)'),
     "bank.seed": number(0, 2**32 - 1, integer=True),
     # knobs
     "knobs.ceiling_db": number(-120, 0, unit="dB"),
@@ -312,8 +332,9 @@ SCHEMA: dict[str, Spec] = {
     "knobs.balance_max": number(0, 10, unit="(knob units)"),
     "knobs.initial_intensity": number(0, 1),
     "knobs.initial_balance": number(-10, 10, unit="(knob units)"),
-    "knobs.schedule_capacity": number(1, 1_000_000, integer=True,
-                                      doc="most timetagged commands waiting at once; more are refused"),
+    "knobs.schedule_capacity": number(
+        1, 1_000_000, integer=True, doc="most timetagged commands waiting at once; more are refused"
+    ),
     # actuator
     "actuator.profile": string(nullable=True, pattern=_PROFILE_NAME, what="a profile name"),
     "actuator.response": _points("Hz", 0, True, -60, 60, 1, True, "explicit response points"),
@@ -323,8 +344,9 @@ SCHEMA: dict[str, Spec] = {
     "osc.host": string(pattern=r"\S+", what="a host name or IP address"),
     "osc.port": number(0, 65535, integer=True, doc="0 = any free port"),
     "osc.prefix": string(pattern=r"(/[A-Za-z0-9_.\-]+)+", what="an OSC address like /vibsynth (no trailing /)"),
-    "osc.allow": custom("a list of IP addresses, networks or 'localhost', e.g. ['127.0.0.1', '192.168.1.0/24']",
-                        _addresses),
+    "osc.allow": custom(
+        "a list of IP addresses, networks or 'localhost', e.g. ['127.0.0.1', '192.168.1.0/24']", _addresses
+    ),
     "osc.reply_port": number(1, 65535, integer=True, nullable=True),
     "osc.schedule_horizon_s": number(0, 3600, low_open=True, unit="s"),
     "osc.notify_rate_hz": number(0, 1000, low_open=True, unit="Hz"),
@@ -340,17 +362,22 @@ SCHEMA: dict[str, Spec] = {
     "midi.release_ms": number(0, 10000, unit="ms"),
     "midi.velocity_curve": number(0.1, 10),
     "midi.pitch_bend_range": number(0, 8, unit="(knob units)"),
-    "midi.channel_map": custom("a mapping {MIDI channel 1-16: 'all' or [actuator channels, 1-based]}",
-                               _midi_channel_map),
+    "midi.channel_map": custom(
+        "a mapping {MIDI channel 1-16: 'all' or [actuator channels, 1-based]}", _midi_channel_map
+    ),
     "midi.mpe": boolean(),
     "midi.attack_ms": number(0, 10000, nullable=True, unit="ms"),
     "midi.cc_glide_max_ms": number(0, 10000, unit="ms"),
     "midi.reconnect_interval_s": number(0.05, 60, unit="s"),
     "midi.nrpn": custom("a mapping {intensity: [msb, lsb], balance: [msb, lsb]} (or 0..16383)", _midi_nrpn),
-    "midi.mapping.intensity": custom("a list of bindings like {cc: 11} or {nrpn: [1, 0]} (optional channel 1-16, "
-                                     "invert, range [low, high])", _midi_bindings),
-    "midi.mapping.balance": custom("a list of bindings like {cc: 74} or {nrpn: [1, 1]} (optional channel 1-16, "
-                                   "invert, range [low, high])", _midi_bindings),
+    "midi.mapping.intensity": custom(
+        "a list of bindings like {cc: 11} or {nrpn: [1, 0]} (optional channel 1-16, invert, range [low, high])",
+        _midi_bindings,
+    ),
+    "midi.mapping.balance": custom(
+        "a list of bindings like {cc: 74} or {nrpn: [1, 1]} (optional channel 1-16, invert, range [low, high])",
+        _midi_bindings,
+    ),
     # speed
     "speed.curve": _points("mm/s", 0, False, 0, 1, 2, False, "speed -> intensity"),
     "speed.balance_per_decade": number(-4, 4, unit="(knob units per decade)"),
@@ -414,8 +441,11 @@ def _validate_layer(values: dict[str, Any], where: Callable[[str], str], *, what
             if dotted in _SECTIONS:
                 raise ConfigError(f"{where(dotted)}: {dotted} must be a section (a mapping of keys), got {_fmt(value)}")
             parent = dotted.rsplit(".", 1)[0] if "." in dotted else ""
-            known = sorted(k.rsplit(".", 1)[-1] for k in SCHEMA if k.startswith(parent + ".")) if parent else \
-                sorted({k.split(".")[0] for k in SCHEMA})
+            known = (
+                sorted(k.rsplit(".", 1)[-1] for k in SCHEMA if k.startswith(parent + "."))
+                if parent
+                else sorted({k.split(".")[0] for k in SCHEMA})
+            )
             raise ConfigError(
                 f"{where(dotted)}: unknown {what} {dotted!r}{_close(dotted, list(SCHEMA))} "
                 f"(allowed {'in ' + parent if parent else 'sections'}: {', '.join(known)})"
@@ -448,33 +478,52 @@ def _cross_check(data: Mapping[str, Any], sources: Mapping[str, str]) -> None:
 
     audio, bank, knobs = data["audio"], data["bank"], data["knobs"]
     if audio["channel_map"] is not None and len(audio["channel_map"]) != audio["channels"]:
-        fail(("audio.channel_map", "audio.channels"), f"audio.channel_map = {audio['channel_map']}: has {len(audio['channel_map'])} "
-             f"entries but audio.channels = {audio['channels']} (allowed: one device output per channel)")
+        fail(
+            ("audio.channel_map", "audio.channels"),
+            f"audio.channel_map = {audio['channel_map']}: has {len(audio['channel_map'])} "
+            f"entries but audio.channels = {audio['channels']} (allowed: one device output per channel)",
+        )
     if bank["balance_min"] >= bank["balance_max"]:
-        fail(("bank.balance_max", "bank.balance_min"), f"bank.balance_max = {bank['balance_max']} must be above bank.balance_min = "
-             f"{bank['balance_min']}")
+        fail(
+            ("bank.balance_max", "bank.balance_min"),
+            f"bank.balance_max = {bank['balance_max']} must be above bank.balance_min = {bank['balance_min']}",
+        )
     if knobs["balance_min"] >= knobs["balance_max"]:
-        fail(("knobs.balance_max", "knobs.balance_min"), f"knobs.balance_max = {knobs['balance_max']} must be above knobs.balance_min = "
-             f"{knobs['balance_min']}")
+        fail(
+            ("knobs.balance_max", "knobs.balance_min"),
+            f"knobs.balance_max = {knobs['balance_max']} must be above knobs.balance_min = {knobs['balance_min']}",
+        )
     if knobs["balance_min"] < bank["balance_min"] or knobs["balance_max"] > bank["balance_max"]:
-        fail(("knobs.balance_min", "knobs.balance_max", "bank.balance_min", "bank.balance_max"), f"live balance range [{knobs['balance_min']:g}, {knobs['balance_max']:g}] (knobs) must lie "
-             f"within the bank's grid [{bank['balance_min']:g}, {bank['balance_max']:g}] (bank.balance_min/max)")
+        fail(
+            ("knobs.balance_min", "knobs.balance_max", "bank.balance_min", "bank.balance_max"),
+            f"live balance range [{knobs['balance_min']:g}, {knobs['balance_max']:g}] (knobs) must lie "
+            f"within the bank's grid [{bank['balance_min']:g}, {bank['balance_max']:g}] (bank.balance_min/max)",
+        )
     if not knobs["balance_min"] <= knobs["initial_balance"] <= knobs["balance_max"]:
-        fail(("knobs.initial_balance", "knobs.balance_min", "knobs.balance_max"), f"knobs.initial_balance = {knobs['initial_balance']}: outside the live range "
-             f"[{knobs['balance_min']:g}, {knobs['balance_max']:g}] (knobs.balance_min/max)")
+        fail(
+            ("knobs.initial_balance", "knobs.balance_min", "knobs.balance_max"),
+            f"knobs.initial_balance = {knobs['initial_balance']}: outside the live range "
+            f"[{knobs['balance_min']:g}, {knobs['balance_max']:g}] (knobs.balance_min/max)",
+        )
     channels = audio["channels"]
     for midi_channel, target in data["midi"]["channel_map"].items():
         if isinstance(target, list) and max(target) > channels:
-            fail(("midi.channel_map", "audio.channels"), f"midi.channel_map = {data['midi']['channel_map']}: MIDI channel {midi_channel} "
-                 f"targets actuator channel {max(target)} but audio.channels = {channels} (allowed: 1..{channels})")
+            fail(
+                ("midi.channel_map", "audio.channels"),
+                f"midi.channel_map = {data['midi']['channel_map']}: MIDI channel {midi_channel} "
+                f"targets actuator channel {max(target)} but audio.channels = {channels} (allowed: 1..{channels})",
+            )
     profile = data["actuator"]["profile"]
     if profile is not None and data["actuator"]["response"] is None:
         from vibsynth.settings.actuators import actuator_profiles, user_profile_dir  # actuators imports this module
 
         names = actuator_profiles()
         if profile not in names:
-            fail("actuator.profile", f"actuator.profile = {profile!r}: no such profile (allowed: "
-                 f"{', '.join(sorted(names)) or 'none found'}, or null; user profiles go in {user_profile_dir()})")
+            fail(
+                "actuator.profile",
+                f"actuator.profile = {profile!r}: no such profile (allowed: "
+                f"{', '.join(sorted(names)) or 'none found'}, or null; user profiles go in {user_profile_dir()})",
+            )
 
 
 @dataclass
@@ -533,7 +582,9 @@ def _parse_env_value(name: str, text: str) -> Any:
     return text if isinstance(value, (dict, list)) else value
 
 
-def _apply_layer(data: dict[str, Any], sources: dict[str, str], values: Mapping[str, Any], source: Callable[[str], str]) -> None:
+def _apply_layer(
+    data: dict[str, Any], sources: dict[str, str], values: Mapping[str, Any], source: Callable[[str], str]
+) -> None:
     for dotted, value in values.items():
         _set(data, dotted, value)
         sources[dotted] = source(dotted)
@@ -546,8 +597,10 @@ def _file_layer(doc: YamlDocument) -> dict[str, Any]:
     values = _leaves(doc.data)
     version = values.get("version", CONFIG_VERSION)
     if _is_number(version) and version > CONFIG_VERSION:
-        raise ConfigError(f"{doc.where(('version',))}: version = {version}: written for a newer vibsynth "
-                          f"(this one reads version {CONFIG_VERSION})")
+        raise ConfigError(
+            f"{doc.where(('version',))}: version = {version}: written for a newer vibsynth "
+            f"(this one reads version {CONFIG_VERSION})"
+        )
     _validate_layer(values, lambda k: doc.where(tuple(k.split("."))))
     return values
 
@@ -601,7 +654,9 @@ def load_config(
     default_doc = parse_yaml(default_config_text(), default_name)
     data: dict[str, Any] = {}
     sources: dict[str, str] = {}
-    _apply_layer(data, sources, _file_layer(default_doc), lambda k: f"default ({default_doc.where(tuple(k.split('.')))})")
+    _apply_layer(
+        data, sources, _file_layer(default_doc), lambda k: f"default ({default_doc.where(tuple(k.split('.')))})"
+    )
     files = [default_name]
 
     user_path: Path | None = None
@@ -649,10 +704,20 @@ def parse_override(text: str) -> tuple[str, Any]:
 
 def add_config_arguments(parser: Any) -> None:
     """Add ``--config FILE`` and ``--set KEY=VALUE`` (repeatable) to an argparse parser."""
-    parser.add_argument("--config", metavar="FILE.yaml", type=Path,
-                        help=f"user config file (default: ${CONFIG_ENV_VAR}, else {user_config_file()})")
-    parser.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], dest="config_set",
-                        help="override one config value (YAML syntax), e.g. --set audio.rate=44100; repeatable")
+    parser.add_argument(
+        "--config",
+        metavar="FILE.yaml",
+        type=Path,
+        help=f"user config file (default: ${CONFIG_ENV_VAR}, else {user_config_file()})",
+    )
+    parser.add_argument(
+        "--set",
+        metavar="KEY=VALUE",
+        action="append",
+        default=[],
+        dest="config_set",
+        help="override one config value (YAML syntax), e.g. --set audio.rate=44100; repeatable",
+    )
 
 
 def config_from_args(args: Any, *, extra: Mapping[str, Any] | None = None) -> Config:

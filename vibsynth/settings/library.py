@@ -1,6 +1,7 @@
 """The preset library: shipped presets (package data) merged with the user's folder (user wins),
 re-read with bounded work per poll (only files whose (mtime, size, inode) changed).
 """
+
 from __future__ import annotations
 
 import difflib
@@ -11,10 +12,10 @@ import re
 import stat
 import threading
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Callable, Iterable
 
 from vibsynth.errors import PresetError
 from vibsynth.formats.files import size_limit_message
@@ -44,8 +45,7 @@ def default_user_dir() -> Path:
 def _files(folder: Path | None) -> list[Path]:
     if folder is None or not folder.is_dir():
         return []
-    return sorted(p for p in folder.iterdir() if p.name.endswith(SUFFIX) and not p.name.startswith(".")
-                  and p.is_file())
+    return sorted(p for p in folder.iterdir() if p.name.endswith(SUFFIX) and not p.name.startswith(".") and p.is_file())
 
 
 #: (mtime_ns, size, inode) of a preset file: what the watcher compares. Nothing is read to
@@ -104,8 +104,13 @@ class PresetLibrary:
     they appear, not at every poll, and a folder that can be listed again is reported once.
     """
 
-    def __init__(self, shipped_dir: str | os.PathLike[str] | None = None,
-                 user_dir: str | os.PathLike[str] | None = None, *, load: bool = True) -> None:
+    def __init__(
+        self,
+        shipped_dir: str | os.PathLike[str] | None = None,
+        user_dir: str | os.PathLike[str] | None = None,
+        *,
+        load: bool = True,
+    ) -> None:
         self.shipped_dir = Path(shipped_dir) if shipped_dir is not None else None
         self.user_dir = Path(user_dir).expanduser() if user_dir is not None else None
         self._lock = threading.RLock()  # guards the published state (short holds only)
@@ -141,9 +146,13 @@ class PresetLibrary:
                 for entry in handle:
                     entries += 1
                     if entries > MAX_ENTRIES_PER_FOLDER:
-                        self._report(f"entries:{folder}", "many", logging.WARNING,
-                                     f"preset folder {folder}: more than {MAX_ENTRIES_PER_FOLDER} entries; only the "
-                                     f"first {MAX_ENTRIES_PER_FOLDER} are looked at")
+                        self._report(
+                            f"entries:{folder}",
+                            "many",
+                            logging.WARNING,
+                            f"preset folder {folder}: more than {MAX_ENTRIES_PER_FOLDER} entries; only the "
+                            f"first {MAX_ENTRIES_PER_FOLDER} are looked at",
+                        )
                         break
                     name = entry.name
                     if name.startswith(".") or not name.endswith(SUFFIX):
@@ -154,25 +163,37 @@ class PresetLibrary:
                     except FileNotFoundError:  # vanished, or a dangling link: no file
                         continue
                     except OSError as exc:  # e.g. a symbolic link loop
-                        self._report(f"stat:{path}", f"errno {exc.errno}", logging.WARNING,
-                                     f"{path}: cannot read ({_why(exc)}); skipped")
+                        self._report(
+                            f"stat:{path}",
+                            f"errno {exc.errno}",
+                            logging.WARNING,
+                            f"{path}: cannot read ({_why(exc)}); skipped",
+                        )
                         continue
                     self._resolve(f"stat:{path}")
                     if not stat.S_ISREG(info.st_mode):
                         continue
                     found[path] = (info.st_mtime_ns, info.st_size, info.st_ino)
                     if len(found) >= MAX_FILES_PER_FOLDER:
-                        self._report(f"files:{folder}", "many", logging.WARNING,
-                                     f"preset folder {folder}: more than {MAX_FILES_PER_FOLDER} preset files; "
-                                     f"only {MAX_FILES_PER_FOLDER} are used")
+                        self._report(
+                            f"files:{folder}",
+                            "many",
+                            logging.WARNING,
+                            f"preset folder {folder}: more than {MAX_FILES_PER_FOLDER} preset files; "
+                            f"only {MAX_FILES_PER_FOLDER} are used",
+                        )
                         break
         except FileNotFoundError:  # no folder is no presets (the user folder need not exist)
             self._resolve(key, f"preset folder {folder}: gone; no presets from it")
             return {}
         except OSError as exc:  # permission denied, symbolic link loop, not a folder
-            self._report(key, f"errno {exc.errno}", logging.WARNING,
-                         f"preset folder {folder}: cannot list it ({_why(exc)}); keeping the presets read from "
-                         "it before until it can be listed again")
+            self._report(
+                key,
+                f"errno {exc.errno}",
+                logging.WARNING,
+                f"preset folder {folder}: cannot list it ({_why(exc)}); keeping the presets read from "
+                "it before until it can be listed again",
+            )
             return None
         self._resolve(key, f"preset folder {folder}: can be listed again")
         if entries <= MAX_ENTRIES_PER_FOLDER:
@@ -224,8 +245,11 @@ class PresetLibrary:
                     continue
                 for path in sorted(listing):
                     signature, previous = listing[path], old.get(path)
-                    if previous is not None and previous.signature == signature and not (
-                            previous.recheck_ns is not None and now >= previous.recheck_ns):
+                    if (
+                        previous is not None
+                        and previous.signature == signature
+                        and not (previous.recheck_ns is not None and now >= previous.recheck_ns)
+                    ):
                         states[path] = previous
                         continue
                     last_good = previous.preset if previous is not None else None
@@ -236,8 +260,10 @@ class PresetLibrary:
                         self._report(f"file:{path}", "too large", logging.WARNING, f"{message}; skipped{keeping}")
                         states[path] = _FileState(origin, folder, signature, last_good, message, None)
                         continue
-                    if n_read and ((read_files is not None and n_read >= read_files)
-                                   or (read_bytes is not None and bytes_read + size > read_bytes)):
+                    if n_read and (
+                        (read_files is not None and n_read >= read_files)
+                        or (read_bytes is not None and bytes_read + size > read_bytes)
+                    ):
                         if previous is not None:  # its old signature stays: read by a later call
                             states[path] = previous
                         continue
@@ -266,8 +292,12 @@ class PresetLibrary:
             if preset is None:
                 continue
             if preset.name in presets and presets[preset.name].origin == preset.origin:
-                self._report(f"twice:{preset.name}", str(path), logging.WARNING,
-                             f"{path}: preset {preset.name!r} defined twice; using {presets[preset.name].path}")
+                self._report(
+                    f"twice:{preset.name}",
+                    str(path),
+                    logging.WARNING,
+                    f"{path}: preset {preset.name!r} defined twice; using {presets[preset.name].path}",
+                )
                 continue
             presets[preset.name] = preset
         errors = {str(p): s.error for p, s in ordered if s.error is not None}
@@ -321,8 +351,9 @@ class PresetLibrary:
         near += [n for n in difflib.get_close_matches(name, names, n=4, cutoff=0.5) if n not in near]
         hint = f"; did you mean {', '.join(near)}?" if near else ""
         where = ", ".join(str(d) for d in (self.shipped_dir, self.user_dir) if d is not None)
-        raise PresetError(f"unknown preset {name!r}{hint} ({len(names)} presets in {where}; "
-                          "`vibsynth preset list` shows them)")
+        raise PresetError(
+            f"unknown preset {name!r}{hint} ({len(names)} presets in {where}; `vibsynth preset list` shows them)"
+        )
 
     def program_map(self) -> dict[int, str]:
         """MIDI program -> preset name.
@@ -336,8 +367,9 @@ class PresetLibrary:
         explicit = sorted((p for p in presets if p.program is not None), key=lambda p: (p.origin != "user", p.name))
         for p in explicit:
             if p.program in out:
-                log.warning("program %d is claimed by %r and %r; using %r", p.program, out[p.program], p.name,
-                            out[p.program])
+                log.warning(
+                    "program %d is claimed by %r and %r; using %r", p.program, out[p.program], p.name, out[p.program]
+                )
                 continue
             out[p.program] = p.name  # type: ignore[index]
         free = (n for n in range(128) if n not in out)
@@ -361,8 +393,9 @@ class PresetLibrary:
     def user_path(self, name: str) -> Path:
         """Where a user preset of this name is (or would be) stored."""
         if not re.fullmatch(NAME_PATTERN, name):
-            raise PresetError(f"preset name {name!r}: must be 1-64 letters, digits, '.', '_' or '-', "
-                              "starting with a letter or digit")
+            raise PresetError(
+                f"preset name {name!r}: must be 1-64 letters, digits, '.', '_' or '-', starting with a letter or digit"
+            )
         if self.user_dir is None:
             raise PresetError("no user preset folder configured (presets.user_dir)")
         return self.user_dir / f"{name}{SUFFIX}"
@@ -394,4 +427,3 @@ def _why(exc: OSError) -> str:
 def iter_preset_files(folder: str | os.PathLike[str]) -> Iterable[Path]:
     """Preset files of a folder (sorted)."""
     return _files(Path(folder))
-

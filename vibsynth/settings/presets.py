@@ -19,6 +19,7 @@ presets (package data) with the user's folder (user wins), and :class:`PresetWat
 reloads it while the service runs, re-reading only files whose (mtime, size, inode)
 changed, with bounded work per poll (see docs/presets.md, "Hot reload").
 """
+
 from __future__ import annotations
 
 import difflib
@@ -26,9 +27,10 @@ import logging
 import math
 import os
 import re
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from vibsynth.errors import PresetError
 from vibsynth.formats.files import MAX_YAML_BYTES, atomic_write
@@ -144,8 +146,10 @@ def migrate(data: dict[str, Any], *, origin: str = "preset") -> dict[str, Any]:
     if isinstance(version, bool) or not isinstance(version, int):
         raise PresetError(f"{origin}: version = {version!r}: must be an integer (allowed: 0..{SCHEMA_VERSION})")
     if version > SCHEMA_VERSION:
-        raise PresetError(f"{origin}: version = {version}: written by a newer vibsynth (this one reads versions "
-                          f"0..{SCHEMA_VERSION}); upgrade vibsynth")
+        raise PresetError(
+            f"{origin}: version = {version}: written by a newer vibsynth (this one reads versions "
+            f"0..{SCHEMA_VERSION}); upgrade vibsynth"
+        )
     if version < 0:
         raise PresetError(f"{origin}: version = {version}: outside the allowed range 0..{SCHEMA_VERSION}")
     while version < SCHEMA_VERSION:
@@ -164,8 +168,17 @@ def _show(value: Any) -> str:
     return short_repr(value)
 
 
-def _check_number(where: str, key: str, value: Any, low: float, high: float, *, integer: bool = False,
-                  unit: str = "", nullable: bool = False) -> float | None:
+def _check_number(
+    where: str,
+    key: str,
+    value: Any,
+    low: float,
+    high: float,
+    *,
+    integer: bool = False,
+    unit: str = "",
+    nullable: bool = False,
+) -> float | None:
     rng = f"[{low:g}, {high:g}]" + (f" {unit}" if unit else "")
     allowed = ("an integer" if integer else "a number") + f" in {rng}" + (" or null" if nullable else "")
     if value is None and nullable:
@@ -187,8 +200,9 @@ def _validate(data: Any, doc: YamlDocument, stem: str | None) -> Preset:
         return doc.where((key,))
 
     if not isinstance(data, dict):
-        raise PresetError(f"{doc.where(())}: a preset must be a mapping of keys ({', '.join(_KEY_ORDER)}), "
-                          f"got {_show(data)}")
+        raise PresetError(
+            f"{doc.where(())}: a preset must be a mapping of keys ({', '.join(_KEY_ORDER)}), got {_show(data)}"
+        )
     for key in data:
         if key not in _KEY_ORDER:
             near = difflib.get_close_matches(str(key), _KEY_ORDER, n=1, cutoff=0.6)
@@ -197,18 +211,24 @@ def _validate(data: Any, doc: YamlDocument, stem: str | None) -> Preset:
     data = migrate(dict(data), origin=at("version") if "version" in data else origin)
     for key in _REQUIRED:
         if key not in data:
-            allowed = "a number in [0, 1]" if key == "intensity" else f"a number in [{-BALANCE_LIMIT:g}, {BALANCE_LIMIT:g}]"
+            allowed = (
+                "a number in [0, 1]" if key == "intensity" else f"a number in [{-BALANCE_LIMIT:g}, {BALANCE_LIMIT:g}]"
+            )
             raise PresetError(f"{origin}: missing key {key!r} (allowed: {allowed})")
 
     name = data.get("name", stem)
     if name is None:
         raise PresetError(f"{origin}: missing key 'name'")
     if not isinstance(name, str) or not re.fullmatch(NAME_PATTERN, name):
-        raise PresetError(f"{at('name')}: name = {_show(name)}: must be 1-64 letters, digits, '.', '_' or '-', "
-                          "starting with a letter or digit")
+        raise PresetError(
+            f"{at('name')}: name = {_show(name)}: must be 1-64 letters, digits, '.', '_' or '-', "
+            "starting with a letter or digit"
+        )
     if stem is not None and name != stem:
-        raise PresetError(f"{at('name')}: name = {name!r} does not match the file name {stem}{SUFFIX} "
-                          f"(rename the file or change the name)")
+        raise PresetError(
+            f"{at('name')}: name = {name!r} does not match the file name {stem}{SUFFIX} "
+            f"(rename the file or change the name)"
+        )
 
     description = data.get("description", "")
     if description is None:
@@ -216,14 +236,16 @@ def _validate(data: Any, doc: YamlDocument, stem: str | None) -> Preset:
     if not isinstance(description, str):
         raise PresetError(f"{at('description')}: description = {_show(description)}: must be text (a string)")
     if len(description) > MAX_DESCRIPTION:
-        raise PresetError(f"{at('description')}: description is {len(description)} characters long "
-                          f"(allowed: at most {MAX_DESCRIPTION})")
+        raise PresetError(
+            f"{at('description')}: description is {len(description)} characters long "
+            f"(allowed: at most {MAX_DESCRIPTION})"
+        )
 
     intensity = _check_number(at("intensity"), "intensity", data["intensity"], 0.0, 1.0)
-    balance = _check_number(at("balance"), "balance", data["balance"], -BALANCE_LIMIT, BALANCE_LIMIT,
-                            unit="(knob units)")
-    glide = _check_number(at("glide_ms"), "glide_ms", data.get("glide_ms"), 0.0, GLIDE_MAX_MS, unit="ms",
-                          nullable=True)
+    balance = _check_number(
+        at("balance"), "balance", data["balance"], -BALANCE_LIMIT, BALANCE_LIMIT, unit="(knob units)"
+    )
+    glide = _check_number(at("glide_ms"), "glide_ms", data.get("glide_ms"), 0.0, GLIDE_MAX_MS, unit="ms", nullable=True)
     program = _check_number(at("program"), "program", data.get("program"), 0, 127, integer=True, nullable=True)
 
     tags = data.get("tags") or []
@@ -235,13 +257,16 @@ def _validate(data: Any, doc: YamlDocument, stem: str | None) -> Preset:
         raise PresetError(f"{at('tags')}: {len(tags)} tags (allowed: at most {MAX_TAGS})")
     for i, tag in enumerate(tags):
         if not isinstance(tag, str) or not re.fullmatch(TAG_PATTERN, tag):
-            raise PresetError(f"{doc.where(('tags', str(i)))}: tags[{i}] = {_show(tag)}: must be 1-32 letters, "
-                              "digits, spaces, '.', '_' or '-'")
+            raise PresetError(
+                f"{doc.where(('tags', str(i)))}: tags[{i}] = {_show(tag)}: must be 1-32 letters, "
+                "digits, spaces, '.', '_' or '-'"
+            )
 
     provenance = data.get("provenance") or {}
     if not isinstance(provenance, dict):
-        raise PresetError(f"{at('provenance')}: provenance = {_show(provenance)}: must be a mapping "
-                          "(e.g. recording: file.wav)")
+        raise PresetError(
+            f"{at('provenance')}: provenance = {_show(provenance)}: must be a mapping (e.g. recording: file.wav)"
+        )
     return Preset(
         name=name,
         intensity=float(intensity),  # type: ignore[arg-type]
@@ -307,8 +332,9 @@ def _dump_block(data: Mapping[str, Any], indent: str = "") -> str:
         if isinstance(value, Mapping) and value:
             out.append(f"{indent}{key}:\n" + _dump_block(value, indent + "  "))
             continue
-        text = dump_yaml({key: value}, sort_keys=False, width=100,
-                         default_flow_style=None if isinstance(value, list) else False)
+        text = dump_yaml(
+            {key: value}, sort_keys=False, width=100, default_flow_style=None if isinstance(value, list) else False
+        )
         out.append("".join(indent + line if line.strip() else line for line in text.splitlines(keepends=True)))
     return "".join(out)
 

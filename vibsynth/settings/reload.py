@@ -1,10 +1,10 @@
-"""Hot reload: a thread that polls the preset library while the service runs (see docs/presets.md).
-"""
+"""Hot reload: a thread that polls the preset library while the service runs (see docs/presets.md)."""
+
 from __future__ import annotations
 
 import logging
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 from vibsynth.errors import PresetError, VibsynthError
 from vibsynth.settings.library import POLL_READ_BYTES, POLL_READ_FILES, PresetLibrary
@@ -64,7 +64,7 @@ class PresetWatcher:
             except Exception:  # noqa: BLE001 - keep watching whatever happens
                 log.exception("preset watcher: unexpected error")
 
-    def start(self) -> "PresetWatcher":
+    def start(self) -> PresetWatcher:
         """Start the polling thread (daemon); returns self."""
         if self._thread is None or not self._thread.is_alive():
             self._stop.clear()
@@ -79,7 +79,7 @@ class PresetWatcher:
             self._thread.join(timeout_s)
             self._thread = None
 
-    def __enter__(self) -> "PresetWatcher":
+    def __enter__(self) -> PresetWatcher:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

@@ -1,5 +1,5 @@
-"""YAML documents that remember the line of every key, so each error can say ``file:line``.
-"""
+"""YAML documents that remember the line of every key, so each error can say ``file:line``."""
+
 from __future__ import annotations
 
 import os
@@ -73,8 +73,9 @@ def _document(loaded: Any, error: type[Exception]) -> YamlDocument:
     return YamlDocument(loaded.data, lines, loaded.origin)
 
 
-def parse_yaml(text: str, origin: str, *, error: type[Exception] = ConfigError,
-               what: str = "a config file") -> YamlDocument:
+def parse_yaml(
+    text: str, origin: str, *, error: type[Exception] = ConfigError, what: str = "a config file"
+) -> YamlDocument:
     """Parse YAML text, keeping the line of every key; duplicate keys are errors.
 
     The text goes through :func:`vibsynth.formats.yamlio.load_yaml` (size cap, no aliases, bounded
@@ -100,8 +101,9 @@ def parse_yaml(text: str, origin: str, *, error: type[Exception] = ConfigError,
     return _document(load_yaml(text=text, origin=origin, error=error, what=what), error)
 
 
-def read_yaml_file(path: str | os.PathLike[str], *, error: type[Exception] = ConfigError,
-                   what: str = "a config file") -> YamlDocument:
+def read_yaml_file(
+    path: str | os.PathLike[str], *, error: type[Exception] = ConfigError, what: str = "a config file"
+) -> YamlDocument:
     """Read and parse a YAML file (see :func:`parse_yaml`): at most :data:`vibsynth.formats.files.MAX_YAML_BYTES`,
     refused before reading when larger; missing/unreadable files raise ``error``."""
     from vibsynth.formats.yamlio import load_yaml
@@ -115,8 +117,7 @@ def yaml_value(text: str, origin: str) -> Any:
     from vibsynth.formats.yamlio import load_yaml
 
     try:
-        return load_yaml(text=text, origin=origin, error=ConfigError, what="a setting",
-                         syntax_error=_NotYaml).data
+        return load_yaml(text=text, origin=origin, error=ConfigError, what="a setting", syntax_error=_NotYaml).data
     except _NotYaml:
         return text
 

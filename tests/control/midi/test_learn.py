@@ -1,4 +1,5 @@
 """MIDI learn saves bindings into the user's config file without destroying comments or other keys."""
+
 from __future__ import annotations
 
 import threading
@@ -50,19 +51,30 @@ class FakeEngine:
 def test_save_keeps_comments_and_other_keys(tmp_path):
     path = tmp_path / "config.yaml"
     path.write_text(USER_CONFIG, encoding="utf-8")
-    bindings = [Binding("intensity", cc=20), Binding("intensity", cc=11), Binding("balance", cc=74),
-                Binding("balance", cc=2, channel=1, invert=True)]
+    bindings = [
+        Binding("intensity", cc=20),
+        Binding("intensity", cc=11),
+        Binding("balance", cc=74),
+        Binding("balance", cc=2, channel=1, invert=True),
+    ]
     save_learned_mapping(path, bindings)
     text = path.read_text(encoding="utf-8")
-    for comment in ("# my studio setup -- keep this comment", "# the interface runs at 44.1 kHz",
-                    "# my keyboard", "# slow release", "# custom port"):
+    for comment in (
+        "# my studio setup -- keep this comment",
+        "# the interface runs at 44.1 kHz",
+        "# my keyboard",
+        "# slow release",
+        "# custom port",
+    ):
         assert comment in text
     data = yaml.safe_load(text)
     assert data["audio"] == {"rate": 44100, "block_size": 256}
     assert data["osc"] == {"port": 9999}
     assert data["midi"]["port"] == "Keystation" and data["midi"]["release_ms"] == 300.0
-    assert data["midi"]["mapping"] == {"intensity": [{"cc": 20}, {"cc": 11}],
-                                       "balance": [{"cc": 74}, {"cc": 2, "channel": 2, "invert": True}]}
+    assert data["midi"]["mapping"] == {
+        "intensity": [{"cc": 20}, {"cc": 11}],
+        "balance": [{"cc": 74}, {"cc": 2, "channel": 2, "invert": True}],
+    }
     # the saved file loads through the normal config path and parses back to the same bindings
     cfg = load_config(path)
     settings = MidiSettings.from_config(cfg.data, 1)
@@ -78,7 +90,10 @@ def test_learned_nrpn_is_written_as_msb_lsb(tmp_path):
 def test_save_creates_a_missing_file(tmp_path):
     path = tmp_path / "sub" / "config.yaml"
     save_learned_mapping(path, [Binding("balance", cc=2, channel=3)])
-    assert yaml.safe_load(path.read_text())["midi"]["mapping"] == {"intensity": [], "balance": [{"cc": 2, "channel": 4}]}
+    assert yaml.safe_load(path.read_text())["midi"]["mapping"] == {
+        "intensity": [],
+        "balance": [{"cc": 2, "channel": 4}],
+    }
 
 
 def test_server_learn_binds_and_saves(tmp_path):
@@ -114,8 +129,13 @@ def test_module_learn_hook_without_server_returns_false():
 
 
 # --------------------------------------------------------------------------- issue 12: one loader, one writer
-BOMB = "\n".join(["a: &a [x,x,x,x,x,x,x,x,x]"] + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]"
-                                                    for a, b in zip("abcdefgh", "bcdefghi")]) + "\n"
+BOMB = (
+    "\n".join(
+        ["a: &a [x,x,x,x,x,x,x,x,x]"]
+        + [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]" for a, b in zip("abcdefgh", "bcdefghi")]
+    )
+    + "\n"
+)
 
 
 def test_learn_refuses_a_bomb_config_and_leaves_it_untouched(tmp_path):
@@ -132,8 +152,9 @@ def test_learn_refuses_a_bomb_config_and_leaves_it_untouched(tmp_path):
     with pytest.raises(ConfigError) as info:
         save_learned_mapping(path, [Binding("balance", cc=2)])
     assert time.perf_counter() - started < 0.5
-    assert str(info.value).startswith(f"{path}:17:8: YAML alias '*a' (anchor '&a' on line 16): aliases are not "
-                                      "allowed in a config file")
+    assert str(info.value).startswith(
+        f"{path}:17:8: YAML alias '*a' (anchor '&a' on line 16): aliases are not allowed in a config file"
+    )
     assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["config.yaml"]
 
 

@@ -1,4 +1,5 @@
 """Unit tests of the MIDI mapping: mido messages through a test port into the real Controller."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -194,8 +195,7 @@ def test_14bit_resolution_is_finer_than_7bit():
 
 
 def test_nrpn_per_channel_with_default_numbers():
-    mapper, ctl, engine, port = make(channels=2, mode="continuous",
-                                     channel_map={1: [1], 2: [2]})
+    mapper, ctl, engine, port = make(channels=2, mode="continuous", channel_map={1: [1], 2: [2]})
     # channel 1 selects the intensity NRPN (1, 0), channel 2 the balance NRPN (1, 1)
     play(mapper, port, cc(99, 1, 0), cc(98, 0, 0), cc(99, 1, 1), cc(98, 1, 1))
     play(mapper, port, cc(6, 127, 0), cc(38, 127, 0))
@@ -365,8 +365,9 @@ def test_release_all_after_disconnect_leaves_no_stuck_note():
 
 # ---------------------------------------------------------------------- program change
 def test_program_change_by_program_field_then_sorted_order():
-    presets = FakePresets([FakePreset("zeta", 0.8, 1.0, program=5), FakePreset("alpha", 0.5, -1.0),
-                           FakePreset("beta", 0.6, 2.0)])
+    presets = FakePresets(
+        [FakePreset("zeta", 0.8, 1.0, program=5), FakePreset("alpha", 0.5, -1.0), FakePreset("beta", 0.6, 2.0)]
+    )
     mapper, ctl, engine, port = make(presets=presets, mode="continuous")
     play(mapper, port, mido.Message("program_change", program=5))
     assert (knob(ctl, "intensity"), knob(ctl, "balance")) == (0.8, 1.0)
@@ -397,10 +398,17 @@ def test_program_change_without_presets_is_counted():
 # ---------------------------------------------------------------------- bad input
 def test_bad_and_unknown_messages_are_ignored_and_counted():
     mapper, ctl, engine, port = make(mode="continuous")
-    play(mapper, port, mido.Message("sysex", data=[1, 2, 3, 4]), cc(20, 5), cc(64, 127),
-         mido.Message("clock"), mido.Message("active_sensing"))
+    play(
+        mapper,
+        port,
+        mido.Message("sysex", data=[1, 2, 3, 4]),
+        cc(20, 5),
+        cc(64, 127),
+        mido.Message("clock"),
+        mido.Message("active_sensing"),
+    )
     assert mapper.handle_bytes([0xB0, 200, 3]) is False  # data byte > 127
-    assert mapper.handle_bytes([0x93]) is False          # truncated
+    assert mapper.handle_bytes([0x93]) is False  # truncated
     assert mapper.handle_bytes([]) is False
     assert engine.commands == []
     assert ctl.error_counts == {"midi_sysex": 1, "midi_unknown_cc": 2, "midi_bad": 3}
@@ -430,9 +438,10 @@ def test_invert_binding():
 
 
 def test_values_are_clamped_before_the_controller():
-    mapper, ctl, engine, port = make(mode="continuous",
-                                     mapping={"intensity": [{"cc": 11, "range": [-1, 2]}],
-                                              "balance": [{"cc": 74, "range": [-10, 10]}]})
+    mapper, ctl, engine, port = make(
+        mode="continuous",
+        mapping={"intensity": [{"cc": 11, "range": [-1, 2]}], "balance": [{"cc": 74, "range": [-10, 10]}]},
+    )
     play(mapper, port, cc(11, 127), cc(74, 0))
     assert knob(ctl, "intensity") == 1.0 and knob(ctl, "balance") == -3.5
     assert not ctl.error_counts
@@ -521,8 +530,9 @@ def test_server_feeds_port_and_releases_notes_on_disconnect():
         ports[name] = FakeInput(name)
         return ports[name]
 
-    server = MidiServer(mapper, port="pad", open_input=open_input, input_names=lambda: list(names),
-                        reconnect_interval_s=60.0)
+    server = MidiServer(
+        mapper, port="pad", open_input=open_input, input_names=lambda: list(names), reconnect_interval_s=60.0
+    )
     server._open()
     assert server._port_name == "Pad B"
     ports["Pad B"].send(on(60, 127))

@@ -1,4 +1,5 @@
 """Test doubles shared by the OSC tests: an engine without audio and a reply-capturing peer."""
+
 from __future__ import annotations
 
 import threading

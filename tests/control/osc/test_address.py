@@ -6,6 +6,7 @@ matcher is now a dynamic programme (no backtracking); these tests compare it wit
 independent brute-force matcher (recursive, memoised) on random patterns and bound the
 time of every match relative to a plain match measured in the same test.
 """
+
 from __future__ import annotations
 
 import functools
@@ -44,9 +45,9 @@ def _reference_valid(pattern: str) -> bool:
         if c in "[{":
             close = "]" if c == "[" else "}"
             end = pattern.find(close, i + 1)
-            if end < 0 or "/" in pattern[i + 1:end]:
+            if end < 0 or "/" in pattern[i + 1 : end]:
                 return False
-            body = pattern[i + 1:end]
+            body = pattern[i + 1 : end]
             if c == "[" and body in ("", "!"):
                 return False
             i = end
@@ -74,7 +75,7 @@ def _reference_in_set(body: str, char: str) -> bool:
 def reference_match(pattern: str, address: str) -> bool:
     """Brute force over the raw strings: try every way, memoised on (pattern index, address index)."""
 
-    @functools.lru_cache(maxsize=None)
+    @functools.cache
     def at(p: int, a: int) -> bool:
         if p == len(pattern):
             return a == len(address)
@@ -86,10 +87,10 @@ def reference_match(pattern: str, address: str) -> bool:
             return char_ok and at(p + 1, a + 1)
         if c == "[":
             end = pattern.index("]", p + 1)
-            return char_ok and _reference_in_set(pattern[p + 1:end], address[a]) and at(end + 1, a + 1)
+            return char_ok and _reference_in_set(pattern[p + 1 : end], address[a]) and at(end + 1, a + 1)
         if c == "{":
             end = pattern.index("}", p + 1)
-            return any(address.startswith(w, a) and at(end + 1, a + len(w)) for w in pattern[p + 1:end].split(","))
+            return any(address.startswith(w, a) and at(end + 1, a + len(w)) for w in pattern[p + 1 : end].split(","))
         return a < len(address) and address[a] == c and at(p + 1, a + 1)
 
     return at(0, 0)
@@ -163,40 +164,46 @@ def _random_pattern(rng) -> str:
 
 
 # ---------------------------------------------------------------------- semantics
-@pytest.mark.parametrize("pattern, address, expected", [
-    ("/a/?", "/a/b", True),
-    ("/a?b", "/a/b", False),                  # ? never matches /
-    ("/a*", "/a/b", False),                   # * never crosses /
-    ("/*/b", "/a/b", True),
-    ("/a/*", "/a/", True),                    # * matches an empty run
-    ("/x[abc]", "/xb", True),
-    ("/x[!abc]", "/xb", False),
-    ("/x[!abc]", "/xd", True),
-    ("/x[a-c]", "/xb", True),
-    ("/x[c-a]", "/xb", True),                 # a reversed range is read low to high
-    ("/x[-a]", "/x-", True),                  # - first is literal
-    ("/x[a-]", "/x-", True),                  # - last is literal
-    ("/{foo,bar}/z", "/bar/z", True),
-    ("/{foo,bar}/z", "/baz/z", False),
-    ("/a{,b}", "/a", True),                   # an empty alternative
-    ("/x*y*z", "/xaaayaaz", True),
-    ("/x*y*z", "/xaaayaa", False),
-    ("/a,b", "/a,b", True),                   # , outside {} is literal
-])
+@pytest.mark.parametrize(
+    "pattern, address, expected",
+    [
+        ("/a/?", "/a/b", True),
+        ("/a?b", "/a/b", False),  # ? never matches /
+        ("/a*", "/a/b", False),  # * never crosses /
+        ("/*/b", "/a/b", True),
+        ("/a/*", "/a/", True),  # * matches an empty run
+        ("/x[abc]", "/xb", True),
+        ("/x[!abc]", "/xb", False),
+        ("/x[!abc]", "/xd", True),
+        ("/x[a-c]", "/xb", True),
+        ("/x[c-a]", "/xb", True),  # a reversed range is read low to high
+        ("/x[-a]", "/x-", True),  # - first is literal
+        ("/x[a-]", "/x-", True),  # - last is literal
+        ("/{foo,bar}/z", "/bar/z", True),
+        ("/{foo,bar}/z", "/baz/z", False),
+        ("/a{,b}", "/a", True),  # an empty alternative
+        ("/x*y*z", "/xaaayaaz", True),
+        ("/x*y*z", "/xaaayaa", False),
+        ("/a,b", "/a,b", True),  # , outside {} is literal
+    ],
+)
 def test_pattern_semantics(pattern, address, expected):
     assert compile_pattern(pattern).matches(address) is expected
     assert reference_match(pattern, address) is expected
 
 
-@pytest.mark.parametrize("bad, fragment", [
-    ("/vibsynth/ch/[1/x", "unbalanced '['"),
-    ("/vibsynth/{a/b}", "unbalanced '{'"),
-    ("/vibsynth/]", "unbalanced ']'"),
-    ("/vibsynth/x}", "unbalanced '}'"),
-    ("/vibsynth/[]", "empty '[...]'"),
-    ("/vibsynth/[!]", "empty '[...]'"),
-    ("/x/" + "*" * 300, f"longer than {MAX_PATTERN_LEN}"),
-])
+@pytest.mark.parametrize(
+    "bad, fragment",
+    [
+        ("/vibsynth/ch/[1/x", "unbalanced '['"),
+        ("/vibsynth/{a/b}", "unbalanced '{'"),
+        ("/vibsynth/]", "unbalanced ']'"),
+        ("/vibsynth/x}", "unbalanced '}'"),
+        ("/vibsynth/[]", "empty '[...]'"),
+        ("/vibsynth/[!]", "empty '[...]'"),
+        ("/x/" + "*" * 300, f"longer than {MAX_PATTERN_LEN}"),
+    ],
+)
 def test_pattern_errors_name_the_problem(bad, fragment):
     with pytest.raises(ParameterError, match=fragment.replace("[", r"\[").replace("{", r"\{")):
         compile_pattern(bad)
@@ -215,9 +222,9 @@ def test_fanout_beyond_the_cap_is_an_error_and_nothing_is_done():
     handler = OscHandler(ctl, sync_worker=None)
     handler.space = AddressSpace("/vibsynth", 4, max_fanout=8)
     peer = FakePeer()
-    handler.handle_packet(encode_message("/vibsynth/ch/*/intensity", (0.5,)), peer)   # 4 routes: fine
+    handler.handle_packet(encode_message("/vibsynth/ch/*/intensity", (0.5,)), peer)  # 4 routes: fine
     assert [c.value for c in ctl.engine.commands] == [0.5]
-    handler.handle_packet(encode_message("/vibsynth/ch/*/*", (0.25,)), peer)          # 32 routes
+    handler.handle_packet(encode_message("/vibsynth/ch/*/*", (0.25,)), peer)  # 32 routes
     address, message = peer.errors()[-1]
     assert address == "/vibsynth/ch/*/*"
     assert "matches 32 addresses, more than the limit of 8" in message
@@ -260,8 +267,10 @@ def test_fuzz_against_reference_within_time_budget(rng):
         ratio = elapsed / (baseline * max(1.0, len(pattern) / len(PLAIN)))
         if ratio > worst_ratio:
             worst_ratio, worst_pattern = ratio, pattern
-    print(f"\nfuzz: {compared} patterns, {matched} matching something; plain match {1e6 * baseline:.0f} us; "
-          f"worst time / (plain x length ratio) = {worst_ratio:.1f} for {worst_pattern!r}")
+    print(
+        f"\nfuzz: {compared} patterns, {matched} matching something; plain match {1e6 * baseline:.0f} us; "
+        f"worst time / (plain x length ratio) = {worst_ratio:.1f} for {worst_pattern!r}"
+    )
     assert matched > 1000
     assert worst_ratio < BUDGET_FACTOR, worst_pattern
 
@@ -287,7 +296,7 @@ def test_pathological_patterns_match_in_linear_time():
     regression fails this test (after 60 s) instead of hanging the suite."""
     patterns = {
         "/vibsynth/" + "*a" * 40 + "x": 0,
-        "/vibsynth/" + "*" * 28 + "x": 0,           # the regex took ~5 s on this one
+        "/vibsynth/" + "*" * 28 + "x": 0,  # the regex took ~5 s on this one
         "/vibsynth/" + "*" * 200: 14,
         "/vibsynth/" + "*" * 245 + "x": 0,
         "/vibsynth/ch/" + "*?" * 118 + "/*": 0,
@@ -295,8 +304,14 @@ def test_pathological_patterns_match_in_linear_time():
     }
     assert all(len(p) <= MAX_PATTERN_LEN for p in patterns)
     try:
-        proc = subprocess.run([sys.executable, "-c", _PATHOLOGICAL_CHILD, json.dumps(list(patterns))],
-                              cwd=ROOT, capture_output=True, text=True, timeout=60, check=True)
+        proc = subprocess.run(
+            [sys.executable, "-c", _PATHOLOGICAL_CHILD, json.dumps(list(patterns))],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=True,
+        )
     except subprocess.TimeoutExpired:
         pytest.fail("a pathological address pattern took more than 60 s (exponential backtracking?)")
     result = json.loads(proc.stdout)

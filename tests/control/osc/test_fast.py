@@ -3,6 +3,7 @@
 The engine is rendered by the test (explicit time): a command the fast path pushed shows in
 the engine's knobs after the next block.
 """
+
 from __future__ import annotations
 
 import math
@@ -76,13 +77,16 @@ def test_common_shapes_take_the_fast_path_and_reach_engine_and_controller(served
     assert ctl.get("intensity", 2) == pytest.approx(0.7)
 
 
-@pytest.mark.parametrize("address, args, types", [
-    ("/vibsynth/intensity", (1.5,), "f"),           # out of range
-    ("/vibsynth/intensity", (math.nan,), "f"),      # not finite
-    ("/vibsynth/balance", (9.0,), "f"),             # beyond the live range
-    ("/vibsynth/texture", (0.5,), "f"),             # wrong count
-    ("/vibsynth/intensity", ("x",), "s"),           # wrong type
-])
+@pytest.mark.parametrize(
+    "address, args, types",
+    [
+        ("/vibsynth/intensity", (1.5,), "f"),  # out of range
+        ("/vibsynth/intensity", (math.nan,), "f"),  # not finite
+        ("/vibsynth/balance", (9.0,), "f"),  # beyond the live range
+        ("/vibsynth/texture", (0.5,), "f"),  # wrong count
+        ("/vibsynth/intensity", ("x",), "s"),  # wrong type
+    ],
+)
 def test_bad_values_go_to_python_and_get_an_error_reply(served, address, args, types):
     engine, ctl, server, client = served
     replies = roundtrip(client, server, address, *args, types=types)
@@ -95,7 +99,7 @@ def test_arrival_order_is_kept_between_python_and_fast_messages(served):
     engine, ctl, server, client = served
     target = ("127.0.0.1", server.port)
     # a pattern (Python) then an exact address (fast) for the same knob, back to back: the last wins
-    for k in range(50):
+    for _k in range(50):
         client.sendto(encode_message("/vibsynth/ch/*/intensity", (0.2,), "f"), target)
         client.sendto(encode_message("/vibsynth/ch/1/intensity", (0.6,), "f"), target)
     roundtrip(client, server, None)
@@ -203,7 +207,9 @@ def test_bundles_beyond_the_schedule_cap_get_an_error_and_change_nothing(bank):
         tag = ((int(when) + 2208988800) << 32) | int((when % 1) * (1 << 32))
         # out of time order: later tags first
         for k in range(25):
-            bundle = encode_bundle(tag - k * (1 << 32) // 100, [encode_message("/vibsynth/intensity", (0.5 - k / 100,), "f")])
+            bundle = encode_bundle(
+                tag - k * (1 << 32) // 100, [encode_message("/vibsynth/intensity", (0.5 - k / 100,), "f")]
+            )
             client.sendto(bundle, ("127.0.0.1", server.port))
         replies = roundtrip(client, server, None)
         errors = [r for r in replies if r.address.endswith("/error")]

@@ -8,6 +8,7 @@ messages must produce exactly the state a simple model predicts. Random byte fli
 messages may or may not stay valid: state may then change only when the packet decodes and
 produced no error.
 """
+
 from __future__ import annotations
 
 import math
@@ -93,11 +94,19 @@ class Corpus:
             return body[:16] + struct.pack(">i", size) + body[20:], 1
         if kind == 8:  # NaN / inf, alone or in a bundle
             value = r.choice([math.nan, math.inf, -math.inf])
-            msg = encode_message(f"/vibsynth/{r.choice(['intensity', 'balance', 'glide', 'speed'])}", (value,), r.choice("fd"))
+            msg = encode_message(
+                f"/vibsynth/{r.choice(['intensity', 'balance', 'glide', 'speed'])}", (value,), r.choice("fd")
+            )
             return (encode_bundle(IMMEDIATE, [msg]) if r.random() < 0.5 else msg), 1
         if kind == 9:  # out of range
-            msg = r.choice([("/vibsynth/intensity", r.uniform(1.001, 1e6)), ("/vibsynth/intensity", -r.uniform(1e-3, 10)),
-                            ("/vibsynth/balance", r.uniform(3.6, 1e9)), ("/vibsynth/ch/2/balance", -r.uniform(3.6, 50))])
+            msg = r.choice(
+                [
+                    ("/vibsynth/intensity", r.uniform(1.001, 1e6)),
+                    ("/vibsynth/intensity", -r.uniform(1e-3, 10)),
+                    ("/vibsynth/balance", r.uniform(3.6, 1e9)),
+                    ("/vibsynth/ch/2/balance", -r.uniform(3.6, 50)),
+                ]
+            )
             return encode_message(msg[0], (msg[1],), "f"), 1
         if kind == 10:  # unknown address / bad pattern / wrong count
             choice = r.randrange(3)
@@ -108,8 +117,9 @@ class Corpus:
             return encode_message("/vibsynth/texture", tuple(0.1 for _ in range(r.choice([0, 1, 3, 5]))), None), 1
         # kind 11: far-future bundle (beyond the horizon): every message rejected
         n = r.randrange(1, 4)
-        return encode_bundle(unix_to_ntp(time.time() + r.uniform(20.0, 1e8)),
-                             [encode_message("/vibsynth/intensity", (0.5,), "f")] * n), n
+        return encode_bundle(
+            unix_to_ntp(time.time() + r.uniform(20.0, 1e8)), [encode_message("/vibsynth/intensity", (0.5,), "f")] * n
+        ), n
 
     def flipped(self) -> bytes:
         saved = dict(self.expected)
@@ -132,7 +142,7 @@ def test_fuzz_handler_100k():
     peer = FakePeer()
     expected_errors = 0
     flips = 0
-    for i in range(N_PACKETS):
+    for _i in range(N_PACKETS):
         roll = rng.random()
         if roll < 0.15:
             handler.handle_packet(corpus.valid(), peer)
@@ -160,9 +170,11 @@ def test_fuzz_handler_100k():
     assert expected_errors <= errors_total
     assert sum(ctl.error_counts.values()) == errors_total
     assert stats.malformed > 10_000 and stats.errors > 10_000
-    print(f"\nfuzz: {N_PACKETS} packets, {stats.malformed} malformed, {stats.errors} errors "
-          f"({expected_errors} from invalid-by-construction), {flips} byte-flipped packets changed state legitimately, "
-          f"{stats.error_replies_suppressed} error replies rate-limited")
+    print(
+        f"\nfuzz: {N_PACKETS} packets, {stats.malformed} malformed, {stats.errors} errors "
+        f"({expected_errors} from invalid-by-construction), {flips} byte-flipped packets changed state legitimately, "
+        f"{stats.error_replies_suppressed} error replies rate-limited"
+    )
 
 
 def test_invalid_packets_counted_exactly_once():
@@ -182,8 +194,12 @@ def test_invalid_packets_counted_exactly_once():
 
 def test_decoder_only_raises_malformed():
     rng = random.Random(SEED + 2)
-    seeds = [encode_message("/vibsynth/ch/1/texture", (0.5, 1.0), "ff"),
-             encode_bundle(IMMEDIATE, [encode_message("/a", (1, "s", b"b"), "isb"), encode_bundle(5, [encode_message("/b")])])]
+    seeds = [
+        encode_message("/vibsynth/ch/1/texture", (0.5, 1.0), "ff"),
+        encode_bundle(
+            IMMEDIATE, [encode_message("/a", (1, "s", b"b"), "isb"), encode_bundle(5, [encode_message("/b")])]
+        ),
+    ]
     for _ in range(20000):
         data = bytearray(rng.choice(seeds))
         for _ in range(rng.randrange(1, 6)):
@@ -191,7 +207,7 @@ def test_decoder_only_raises_malformed():
             if op == 0 and data:
                 data[rng.randrange(len(data))] = rng.getrandbits(8)
             elif op == 1 and data:
-                del data[rng.randrange(len(data)):]
+                del data[rng.randrange(len(data)) :]
             else:
                 data += bytes(rng.getrandbits(8) for _ in range(4))
         try:
@@ -210,7 +226,7 @@ def ping(client: socket.socket, target: tuple, token: int, attempts: int = 30) -
                 msg = decode_packet(client.recvfrom(65536)[0])
                 if msg.address == "/vibsynth/pong" and msg.args == (token,):
                     return True
-        except socket.timeout:
+        except TimeoutError:
             continue
     return False
 
@@ -243,8 +259,10 @@ def test_socket_burst_server_survives():
         received = server.counters()["packets"]
         counted = server.handler.stats.errors + server.handler.stats.malformed
         assert server.stats.handler_errors == 0 and counted > 0
-        print(f"\nsocket burst: sent {sent} + 2, received {received}, counted errors {counted}, "
-              f"rcvbuf {server.udp.rcvbuf} bytes")
+        print(
+            f"\nsocket burst: sent {sent} + 2, received {received}, counted errors {counted}, "
+            f"rcvbuf {server.udp.rcvbuf} bytes"
+        )
     finally:
         client.close()
         server.stop()

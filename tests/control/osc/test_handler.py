@@ -1,5 +1,6 @@
 """Unit tests of the OSC server: codec, patterns, handlers (decoded messages and raw bytes), no socket
 except for the small transport tests at the end."""
+
 from __future__ import annotations
 
 import argparse
@@ -74,28 +75,31 @@ def test_codec_arrays():
     assert decode_packet(data).args == ((1, 2),)
 
 
-@pytest.mark.parametrize("data", [
-    b"",
-    b"/x\x00",                                  # not a multiple of 4
-    b"/abc",                                    # unterminated address
-    b"x\x00\x00\x00",                           # neither message nor bundle
-    b"/x\x00\x00,i\x00\x00",                    # int missing
-    b"/x\x00\x00,f\x00\x00\x00\x00",            # truncated float
-    b"/x\x00\x00,q\x00\x00",                    # unknown type tag
-    b"/x\x00\x00i\x00\x00\x00",                 # type tags without comma
-    b"/x\x00\x00,s\x00\x00abcd",                # unterminated string
-    b"/\xff\xfe\x00,\x00\x00\x00",              # address not UTF-8
-    b"/x\x00\x00,[i\x00" + b"\x00\x00\x00\x01", # unbalanced [
-    b"/x\x00\x00,]\x00\x00",                    # unbalanced ]
-    b"/x\x00\x00,b\x00\x00\xff\xff\xff\xff",    # negative blob size
-    b"/x\x00\x00,b\x00\x00\x00\x00\x00\x10",    # blob runs past the end
-    b"/x\x00\x00,i\x00\x00\x00\x00\x00\x01\x00\x00\x00\x00",  # trailing bytes
-    b"#bundle\x00\x00\x00\x00",                 # header truncated
-    b"#bundle\x00" + b"\x00" * 7 + b"\x01" + b"\xff\xff\xff\xfc" + b"/x\x00\x00",  # negative element size
-    b"#bundle\x00" + b"\x00" * 7 + b"\x01" + b"\x00\x00\x00\x00",                  # zero element size
-    b"#bundle\x00" + b"\x00" * 7 + b"\x01" + b"\x00\x00\x00\x40" + b"/x\x00\x00",  # element past the end
-    b"#bundle\x00" + b"\x00" * 7 + b"\x01" + b"\x00\x00\x00\x06" + b"/x\x00\x00\x00\x00\x00\x00",  # size % 4
-])
+@pytest.mark.parametrize(
+    "data",
+    [
+        b"",
+        b"/x\x00",  # not a multiple of 4
+        b"/abc",  # unterminated address
+        b"x\x00\x00\x00",  # neither message nor bundle
+        b"/x\x00\x00,i\x00\x00",  # int missing
+        b"/x\x00\x00,f\x00\x00\x00\x00",  # truncated float
+        b"/x\x00\x00,q\x00\x00",  # unknown type tag
+        b"/x\x00\x00i\x00\x00\x00",  # type tags without comma
+        b"/x\x00\x00,s\x00\x00abcd",  # unterminated string
+        b"/\xff\xfe\x00,\x00\x00\x00",  # address not UTF-8
+        b"/x\x00\x00,[i\x00" + b"\x00\x00\x00\x01",  # unbalanced [
+        b"/x\x00\x00,]\x00\x00",  # unbalanced ]
+        b"/x\x00\x00,b\x00\x00\xff\xff\xff\xff",  # negative blob size
+        b"/x\x00\x00,b\x00\x00\x00\x00\x00\x10",  # blob runs past the end
+        b"/x\x00\x00,i\x00\x00\x00\x00\x00\x01\x00\x00\x00\x00",  # trailing bytes
+        b"#bundle\x00\x00\x00\x00",  # header truncated
+        b"#bundle\x00" + b"\x00" * 7 + b"\x01" + b"\xff\xff\xff\xfc" + b"/x\x00\x00",  # negative element size
+        b"#bundle\x00" + b"\x00" * 7 + b"\x01" + b"\x00\x00\x00\x00",  # zero element size
+        b"#bundle\x00" + b"\x00" * 7 + b"\x01" + b"\x00\x00\x00\x40" + b"/x\x00\x00",  # element past the end
+        b"#bundle\x00" + b"\x00" * 7 + b"\x01" + b"\x00\x00\x00\x06" + b"/x\x00\x00\x00\x00\x00\x00",  # size % 4
+    ],
+)
 def test_codec_rejects_malformed(data):
     with pytest.raises(MalformedPacket):
         decode_packet(data)
@@ -123,16 +127,19 @@ def test_encode_rejects_bad_arguments():
 
 
 # ---------------------------------------------------------------------- patterns
-@pytest.mark.parametrize("pattern, expected", [
-    ("/vibsynth/ch/*/balance", {1, 2, 3, 4}),
-    ("/vibsynth/ch/{1,3}/balance", {1, 3}),
-    ("/vibsynth/ch/[2-3]/balance", {2, 3}),
-    ("/vibsynth/ch/[0-3]/balance", {1, 2, 3}),
-    ("/vibsynth/ch/[!1]/balance", {2, 3, 4}),
-    ("/vibsynth/ch/?/bal*", {1, 2, 3, 4}),
-    ("/vibsynth/ch/9/balance", set()),
-    ("/vibsynth/ch/1*/balance", {1}),
-])
+@pytest.mark.parametrize(
+    "pattern, expected",
+    [
+        ("/vibsynth/ch/*/balance", {1, 2, 3, 4}),
+        ("/vibsynth/ch/{1,3}/balance", {1, 3}),
+        ("/vibsynth/ch/[2-3]/balance", {2, 3}),
+        ("/vibsynth/ch/[0-3]/balance", {1, 2, 3}),
+        ("/vibsynth/ch/[!1]/balance", {2, 3, 4}),
+        ("/vibsynth/ch/?/bal*", {1, 2, 3, 4}),
+        ("/vibsynth/ch/9/balance", set()),
+        ("/vibsynth/ch/1*/balance", {1}),
+    ],
+)
 def test_pattern_matching_channels(pattern, expected):
     space = AddressSpace("/vibsynth", 4)
     routes = space.match(pattern)
@@ -209,7 +216,9 @@ def test_glide_is_in_ms(handler, ctl, peer):
     assert ctl.get("glide", 0) == pytest.approx(0.15)
 
 
-@pytest.mark.parametrize("args, types, muted", [((1,), "i", True), ((0,), "i", False), ((), "T", True), ((1.0,), "f", True)])
+@pytest.mark.parametrize(
+    "args, types, muted", [((1,), "i", True), ((0,), "i", False), ((), "T", True), ((1.0,), "f", True)]
+)
 def test_mute(handler, ctl, peer, args, types, muted):
     handler.handle_packet(encode_message("/vibsynth/ch/3/mute", args, types), peer)
     assert ctl.get("mute", 2) is muted and ctl.get("mute", 0) is False
@@ -242,25 +251,28 @@ def test_preset_all_and_per_channel(handler, ctl, peer):
 
 
 # ---------------------------------------------------------------------- errors
-@pytest.mark.parametrize("address, args, types, kind, fragment", [
-    ("/vibsynth/volume", (0.5,), "f", "osc.unknown_address", "unknown address"),
-    ("/vibsynth/ch/5/intensity", (0.5,), "f", "osc.unknown_address", "unknown address"),
-    ("/vibsynth/ch/0/intensity", (0.5,), "f", "osc.unknown_address", "unknown address"),
-    ("/vibsynth/intensity", (), "", "osc.bad_arguments", "expects 1 argument"),
-    ("/vibsynth/intensity", (0.1, 0.2), "ff", "osc.bad_arguments", "expects 1 argument"),
-    ("/vibsynth/intensity", ("loud",), "s", "osc.bad_arguments", "must be a number"),
-    ("/vibsynth/intensity", (), "T", "osc.bad_arguments", "must be a number"),
-    ("/vibsynth/intensity", (float("nan"),), "f", "osc.invalid_value", "finite"),
-    ("/vibsynth/balance", (float("inf"),), "d", "osc.invalid_value", "finite"),
-    ("/vibsynth/intensity", (), "I", "osc.bad_arguments", "must be a number"),
-    ("/vibsynth/intensity", (1.5,), "f", "osc.invalid_value", "outside the allowed range"),
-    ("/vibsynth/balance", (-9.0,), "f", "osc.invalid_value", "outside the allowed range"),
-    ("/vibsynth/texture", (0.5,), "f", "osc.bad_arguments", "expects 2"),
-    ("/vibsynth/texture", (0.5, 99.0), "ff", "osc.invalid_value", "balance"),
-    ("/vibsynth/preset", (3,), "i", "osc.bad_arguments", "must be a string"),
-    ("/vibsynth/speed", (-1.0,), "f", "osc.invalid_value", ">= 0"),
-    ("/vibsynth/ch/[1/intensity", (0.5,), "f", "osc.bad_pattern", "unbalanced"),
-])
+@pytest.mark.parametrize(
+    "address, args, types, kind, fragment",
+    [
+        ("/vibsynth/volume", (0.5,), "f", "osc.unknown_address", "unknown address"),
+        ("/vibsynth/ch/5/intensity", (0.5,), "f", "osc.unknown_address", "unknown address"),
+        ("/vibsynth/ch/0/intensity", (0.5,), "f", "osc.unknown_address", "unknown address"),
+        ("/vibsynth/intensity", (), "", "osc.bad_arguments", "expects 1 argument"),
+        ("/vibsynth/intensity", (0.1, 0.2), "ff", "osc.bad_arguments", "expects 1 argument"),
+        ("/vibsynth/intensity", ("loud",), "s", "osc.bad_arguments", "must be a number"),
+        ("/vibsynth/intensity", (), "T", "osc.bad_arguments", "must be a number"),
+        ("/vibsynth/intensity", (float("nan"),), "f", "osc.invalid_value", "finite"),
+        ("/vibsynth/balance", (float("inf"),), "d", "osc.invalid_value", "finite"),
+        ("/vibsynth/intensity", (), "I", "osc.bad_arguments", "must be a number"),
+        ("/vibsynth/intensity", (1.5,), "f", "osc.invalid_value", "outside the allowed range"),
+        ("/vibsynth/balance", (-9.0,), "f", "osc.invalid_value", "outside the allowed range"),
+        ("/vibsynth/texture", (0.5,), "f", "osc.bad_arguments", "expects 2"),
+        ("/vibsynth/texture", (0.5, 99.0), "ff", "osc.invalid_value", "balance"),
+        ("/vibsynth/preset", (3,), "i", "osc.bad_arguments", "must be a string"),
+        ("/vibsynth/speed", (-1.0,), "f", "osc.invalid_value", ">= 0"),
+        ("/vibsynth/ch/[1/intensity", (0.5,), "f", "osc.bad_pattern", "unbalanced"),
+    ],
+)
 def test_errors_reply_count_and_change_nothing(handler, ctl, peer, address, args, types, kind, fragment):
     before = ctl.state()
     handler.handle_packet(encode_message(address, args, types), peer)
@@ -347,16 +359,23 @@ def test_get_global_and_per_channel(handler, ctl, peer):
     send(handler, peer, "/vibsynth/ch/3/intensity", 0.25)
     send(handler, peer, "/vibsynth/get", "intensity")
     assert [(m.address, m.args) for m in peer.messages()] == [
-        ("/vibsynth/ch/1/intensity", (0.5,)), ("/vibsynth/ch/2/intensity", (0.5,)),
-        ("/vibsynth/ch/3/intensity", (0.25,)), ("/vibsynth/ch/4/intensity", (0.5,))]
+        ("/vibsynth/ch/1/intensity", (0.5,)),
+        ("/vibsynth/ch/2/intensity", (0.5,)),
+        ("/vibsynth/ch/3/intensity", (0.25,)),
+        ("/vibsynth/ch/4/intensity", (0.5,)),
+    ]
     peer.clear()
     send(handler, peer, "/vibsynth/ch/3/get", "texture")
     send(handler, peer, "/vibsynth/get", "glide")
     send(handler, peer, "/vibsynth/get", "mute")
     send(handler, peer, "/vibsynth/get", "preset")
     got = [(m.address, m.types, m.args) for m in peer.messages()]
-    assert got == [("/vibsynth/ch/3/texture", "ff", (0.25, 0.0)), ("/vibsynth/glide", "f", (pytest.approx(20.0),)),
-                   ("/vibsynth/mute", "i", (0,)), ("/vibsynth/preset", "s", ("",))]
+    assert got == [
+        ("/vibsynth/ch/3/texture", "ff", (0.25, 0.0)),
+        ("/vibsynth/glide", "f", (pytest.approx(20.0),)),
+        ("/vibsynth/mute", "i", (0,)),
+        ("/vibsynth/preset", "s", ("",)),
+    ]
 
 
 def test_get_reply_is_a_valid_setter(handler, ctl, peer):
@@ -391,6 +410,7 @@ def test_status_reads_engine_stats_defensively(ctl, peer):
     class Stats:
         underflows = 3
         load_avg = 0.25
+
     ctl.engine.stats = Stats()
     handler = OscHandler(ctl, block_size=128)
     pairs = dict(handler.status_pairs())
@@ -485,8 +505,9 @@ def test_notify_unavailable_without_notifier(handler, peer):
 
 # ---------------------------------------------------------------------- bundles
 def test_immediate_bundle_applies_now(handler, ctl, peer):
-    data = encode_bundle(IMMEDIATE, [encode_message("/vibsynth/intensity", (0.5,)),
-                                     encode_message("/vibsynth/ch/1/balance", (1.0,))])
+    data = encode_bundle(
+        IMMEDIATE, [encode_message("/vibsynth/intensity", (0.5,)), encode_message("/vibsynth/ch/1/balance", (1.0,))]
+    )
     handler.handle_packet(data, peer)
     assert [c.at_frame for c in ctl.engine.commands] == [None, None]
     assert ctl.get("balance", 0) == 1.0 and handler.stats.bundles == 1
@@ -510,8 +531,10 @@ def test_past_timetag_applies_now(handler, ctl, peer):
 
 
 def test_bundle_beyond_horizon_rejected(handler, ctl, peer):
-    data = encode_bundle(unix_to_ntp(time.time() + 3600.0),
-                         [encode_message("/vibsynth/intensity", (0.5,)), encode_message("/vibsynth/balance", (1.0,))])
+    data = encode_bundle(
+        unix_to_ntp(time.time() + 3600.0),
+        [encode_message("/vibsynth/intensity", (0.5,)), encode_message("/vibsynth/balance", (1.0,))],
+    )
     handler.handle_packet(data, peer)
     assert ctl.engine.commands == [] and ctl.get("intensity", 0) == 0.0
     errors = peer.errors()
@@ -533,15 +556,16 @@ def test_stream_clock_keeps_least_late_offset():
     class Eng:
         fs = 1000.0
         frame_position = 0
+
     wall = [10.0]
     eng = Eng()
     clock = StreamClock(eng, wall=lambda: wall[0])
-    eng.frame_position, wall[0] = 1000, 11.0   # exact
+    eng.frame_position, wall[0] = 1000, 11.0  # exact
     clock.sample()
     eng.frame_position, wall[0] = 1000, 11.09  # block not yet rendered: looks late
     frame, current = clock.frame_at(12.0)
     assert frame == pytest.approx(2000, abs=1) and current == 1000
-    eng.frame_position, wall[0] = 0, 20.0      # the stream restarted
+    eng.frame_position, wall[0] = 0, 20.0  # the stream restarted
     assert clock.frame_at(21.0)[0] == pytest.approx(1000, abs=1)
 
 
@@ -560,13 +584,16 @@ def test_add_arguments_and_create():
     assert osc_adapter.create(load_config(), parser.parse_args(["--no-osc"]), make_controller(2), None) is None
 
 
-@pytest.mark.parametrize("overrides", [
-    {"osc": {"port": 70000}},
-    {"osc": {"schedule_horizon_s": -1}},
-    {"osc": {"notify_rate_hz": 0}},
-    {"osc": {"prefix": "no-slash"}},
-    {"speed": {"curve": [[5, 0.2], [1, 0.3]]}},
-])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {"osc": {"port": 70000}},
+        {"osc": {"schedule_horizon_s": -1}},
+        {"osc": {"notify_rate_hz": 0}},
+        {"osc": {"prefix": "no-slash"}},
+        {"speed": {"curve": [[5, 0.2], [1, 0.3]]}},
+    ],
+)
 def test_create_rejects_bad_config(overrides):
     config = load_config()
     for section, values in overrides.items():
@@ -640,8 +667,10 @@ def test_tcp_slip_transport():
     server.start()
     conn = socket.create_connection(("127.0.0.1", server.port), timeout=5.0)
     try:
-        conn.sendall(slip_encode(encode_message("/vibsynth/intensity", (0.25,))) +
-                     slip_encode(encode_message("/vibsynth/ping", (5,))))
+        conn.sendall(
+            slip_encode(encode_message("/vibsynth/intensity", (0.25,)))
+            + slip_encode(encode_message("/vibsynth/ping", (5,)))
+        )
         decoder = SlipDecoder()
         frames: list[bytes] = []
         while not frames:
@@ -659,15 +688,28 @@ def _batch(peer, *messages):
 
 
 def test_batch_coalesces_to_the_last_move(handler, ctl, peer):
-    handler.handle_batch(_batch(peer, *[("/vibsynth/ch/1/intensity", k / 10) for k in range(10)],
-                                ("/vibsynth/ch/1/balance", 1.0), ("/vibsynth/ch/1/balance", 2.0)))
+    handler.handle_batch(
+        _batch(
+            peer,
+            *[("/vibsynth/ch/1/intensity", k / 10) for k in range(10)],
+            ("/vibsynth/ch/1/balance", 1.0),
+            ("/vibsynth/ch/1/balance", 2.0),
+        )
+    )
     assert [(c.name, c.value) for c in ctl.engine.commands] == [("intensity", pytest.approx(0.9)), ("balance", 2.0)]
     assert handler.stats.messages == 12
 
 
 def test_batch_result_equals_sequential_application(rng, peer):
-    knobs = ["/vibsynth/intensity", "/vibsynth/ch/1/intensity", "/vibsynth/ch/{1,2}/intensity",
-             "/vibsynth/ch/2/texture", "/vibsynth/texture", "/vibsynth/ch/3/speed", "/vibsynth/balance"]
+    knobs = [
+        "/vibsynth/intensity",
+        "/vibsynth/ch/1/intensity",
+        "/vibsynth/ch/{1,2}/intensity",
+        "/vibsynth/ch/2/texture",
+        "/vibsynth/texture",
+        "/vibsynth/ch/3/speed",
+        "/vibsynth/balance",
+    ]
     for _ in range(50):
         messages = []
         for _ in range(int(rng.integers(1, 12))):
@@ -687,8 +729,15 @@ def test_batch_result_equals_sequential_application(rng, peer):
 
 
 def test_batch_flushes_before_queries_and_replies_errors(handler, ctl, peer):
-    handler.handle_batch(_batch(peer, ("/vibsynth/ch/2/intensity", 0.25), ("/vibsynth/ch/2/get", "intensity"),
-                                ("/vibsynth/ch/2/intensity", 7.0), ("/vibsynth/ch/2/intensity", 0.5)))
+    handler.handle_batch(
+        _batch(
+            peer,
+            ("/vibsynth/ch/2/intensity", 0.25),
+            ("/vibsynth/ch/2/get", "intensity"),
+            ("/vibsynth/ch/2/intensity", 7.0),
+            ("/vibsynth/ch/2/intensity", 0.5),
+        )
+    )
     got = [(m.address, m.args) for m in peer.messages()]
     assert got[0] == ("/vibsynth/ch/2/intensity", (0.25,))
     assert got[1][0] == "/vibsynth/error" and "outside the allowed range" in got[1][1][1]
@@ -700,7 +749,9 @@ def test_send_type_inference_and_forcing():
     from vibsynth.cli.send import convert
 
     assert convert(["1", "0.5", "-2", "wood", "1e3", "99999999999"], None) == (
-        [1, 0.5, -2, "wood", 1000.0, 99999999999.0], "ifisff")
+        [1, 0.5, -2, "wood", 1000.0, 99999999999.0],
+        "ifisff",
+    )
     assert convert(["3", "0.5"], "sd") == (["3", 0.5], "sd")
     assert convert(["7"], ",Ti") == ([7], "Ti")
     with pytest.raises(ParameterError):
@@ -746,7 +797,7 @@ def test_notify_over_udp_pushes_changes_from_other_sources():
         seen: dict[str, tuple] = {}
         while "/vibsynth/done" not in seen or "/vibsynth/ch/1/intensity" not in seen:
             packet = decode_packet(client.recvfrom(65536)[0])
-            for msg in (packet.elements if isinstance(packet, Bundle) else (packet,)):
+            for msg in packet.elements if isinstance(packet, Bundle) else (packet,):
                 seen[msg.address] = msg.args
         assert seen["/vibsynth/ch/1/intensity"] == (0.0,)
         ctl.set_knob("intensity", 0.75, source="midi")  # not OSC: still pushed

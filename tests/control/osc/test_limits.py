@@ -6,6 +6,7 @@
 * TCP: a per-address and a global connection cap, an idle timeout; stalled clients
   cannot lock others out.
 """
+
 from __future__ import annotations
 
 import re
@@ -66,9 +67,9 @@ def test_status_reply_goes_to_local_and_large_enough_requests():
     assert decode_packet(local.sent[0]).address == "/vibsynth/status.reply" and size > 20 * 20
     padded = encode_message("/vibsynth/status", (b"\0" * (size // REPLY_AMPLIFICATION),), "b")
     remote = DatagramPeer(OFF_HOST)
-    handler.handle_packet(padded, remote)                 # padding buys the room (as in QUIC)
+    handler.handle_packet(padded, remote)  # padding buys the room (as in QUIC)
     assert [m.address for m in remote.messages()] == ["/vibsynth/status.reply"]
-    tcp = FakePeer(OFF_HOST)                              # not a datagram peer: no limit
+    tcp = FakePeer(OFF_HOST)  # not a datagram peer: no limit
     handler.handle_packet(encode_message("/vibsynth/status"), tcp)
     assert decode_packet(tcp.sent[0]).address == "/vibsynth/status.reply"
 
@@ -78,11 +79,11 @@ def test_error_reply_is_cut_to_three_times_the_request():
     request = encode_message("/vibsynth/get", ("no-such-setting",))
     peer = DatagramPeer(OFF_HOST)
     handler.handle_packet(request, peer)
-    (address, message), = peer.errors()
+    ((address, message),) = peer.errors()
     assert address == "/vibsynth/get" and message.startswith("unknown setting 'no-such-setting'")
     assert message.endswith("...") and len(peer.sent[0]) <= REPLY_AMPLIFICATION * len(request)
     assert handler.stats.replies_truncated == 1
-    local = DatagramPeer(("::ffff:127.0.0.1", 40000))    # the same on this host: whole message
+    local = DatagramPeer(("::ffff:127.0.0.1", 40000))  # the same on this host: whole message
     handler.handle_packet(request, local)
     assert local.errors()[0][1].endswith("texture")
 
@@ -92,10 +93,22 @@ def test_random_requests_never_amplify(rng):
     ctl = make_controller(8)
     handler = _handler(ctl)
     for ch in range(8):
-        ctl.set_knob("intensity", ch / 10.0, channels=(ch,), source="test")   # per-channel get replies
-    addresses = ["/vibsynth/status", "/vibsynth/get", "/vibsynth/ch/*/get", "/vibsynth/*", "/vibsynth/ch/*/*",
-                 "/vibsynth/ping", "/vibsynth/preset", "/vibsynth/nothing", "/vibsynth/sync", "/vibsynth/notify",
-                 "/vibsynth/intensity", "/*/*", "/vibsynth/[x"]
+        ctl.set_knob("intensity", ch / 10.0, channels=(ch,), source="test")  # per-channel get replies
+    addresses = [
+        "/vibsynth/status",
+        "/vibsynth/get",
+        "/vibsynth/ch/*/get",
+        "/vibsynth/*",
+        "/vibsynth/ch/*/*",
+        "/vibsynth/ping",
+        "/vibsynth/preset",
+        "/vibsynth/nothing",
+        "/vibsynth/sync",
+        "/vibsynth/notify",
+        "/vibsynth/intensity",
+        "/*/*",
+        "/vibsynth/[x",
+    ]
     values = [0.5, 7, "intensity", "texture", "nosuch", 2.5, b"\0" * 8]
     worst = 0.0
     for _ in range(2000):
@@ -111,22 +124,27 @@ def test_random_requests_never_amplify(rng):
 def test_fit_osc_string():
     assert fit_osc_string("abc", 4) == "abc"
     assert fit_osc_string("abcdefgh", 8) == "abcd..."
-    assert fit_osc_string("ééééé", 8) == "éé..."        # never cuts a UTF-8 character
+    assert fit_osc_string("ééééé", 8) == "éé..."  # never cuts a UTF-8 character
     assert fit_osc_string("abcdef", 4) == "..."
 
 
 # ---------------------------------------------------------------------- path redaction
-@pytest.mark.parametrize("text, expected", [
-    ("/home/ana/.config/vibsynth/presets/silk.yaml:3: intensity = 2", "silk.yaml:3: intensity = 2"),
-    ("unknown preset 'x' (3 presets in /usr/share/vibsynth/presets, /home/ana/p)",
-     "unknown preset 'x' (3 presets in presets, p)"),
-    (r"C:\Users\ana\presets\silk.yaml: bad", "silk.yaml: bad"),
-    ("~/presets/a.yaml missing", "a.yaml missing"),
-    ("'/srv/x/' is not a folder", "'x' is not a folder"),
-    ("speed must be >= 0 mm/s, got -1", "speed must be >= 0 mm/s, got -1"),
-    ("/vibsynth/ch/1/intensity and /vibsynth/notify", "/vibsynth/ch/1/intensity and /vibsynth/notify"),
-    ("a / b", "a / b"),
-])
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("/home/ana/.config/vibsynth/presets/silk.yaml:3: intensity = 2", "silk.yaml:3: intensity = 2"),
+        (
+            "unknown preset 'x' (3 presets in /usr/share/vibsynth/presets, /home/ana/p)",
+            "unknown preset 'x' (3 presets in presets, p)",
+        ),
+        (r"C:\Users\ana\presets\silk.yaml: bad", "silk.yaml: bad"),
+        ("~/presets/a.yaml missing", "a.yaml missing"),
+        ("'/srv/x/' is not a folder", "'x' is not a folder"),
+        ("speed must be >= 0 mm/s, got -1", "speed must be >= 0 mm/s, got -1"),
+        ("/vibsynth/ch/1/intensity and /vibsynth/notify", "/vibsynth/ch/1/intensity and /vibsynth/notify"),
+        ("a / b", "a / b"),
+    ],
+)
 def test_redact_paths(text, expected):
     assert redact_paths(text, "/vibsynth") == expected
 
@@ -136,14 +154,14 @@ def test_preset_error_reply_has_no_path(tmp_path):
     user_dir.mkdir(parents=True)
     library = PresetLibrary(shipped_dir=None, user_dir=user_dir)
     with pytest.raises(PresetError, match=str(user_dir)):
-        library.get("nosuch")                                   # the message names the folder ...
+        library.get("nosuch")  # the message names the folder ...
     ctl = Controller(FakeEngine(2), limits=KnobLimits(), preset_resolver=library.get)
     handler = _handler(ctl)
     peer = FakePeer(("127.0.0.1", 40000))
     handler.handle_packet(encode_message("/vibsynth/preset", ("nosuch",)), peer)
-    (address, message), = peer.errors()
+    ((address, message),) = peer.errors()
     assert address == "/vibsynth/preset" and message.startswith("unknown preset 'nosuch'")
-    assert str(tmp_path) not in message and "/home" not in message   # ... the reply does not
+    assert str(tmp_path) not in message and "/home" not in message  # ... the reply does not
     assert "presets in presets" in message
 
 
@@ -158,11 +176,34 @@ def test_preset_file_error_names_only_the_file(tmp_path):
 
 
 # ---------------------------------------------------------------------- osc.allow
-ACCEPTED = [[], ["127.0.0.1"], ["192.168.0.0/16"], ["10.0.0.0/8"], ["::1/128"], ["::1"], ["localhost"],
-            ["192.168.1.7/24"], ["::ffff:127.0.0.0/104"], ["0.0.0.0/0", "::/0"], None,
-            ["127.0.0.1", "10.0.0.0/8", "::1/128", "LocalHost"]]
-REJECTED = [["somewhere"], ["example.com"], ["300.1.1.1"], ["10.0.0.0/33"], [10], [" 10.0.0.1"], "10.0.0.0/8",
-            {"a": 1}, [["127.0.0.1"]], ["127.0.0.1/255.0.0.0x"], [None], 7]
+ACCEPTED = [
+    [],
+    ["127.0.0.1"],
+    ["192.168.0.0/16"],
+    ["10.0.0.0/8"],
+    ["::1/128"],
+    ["::1"],
+    ["localhost"],
+    ["192.168.1.7/24"],
+    ["::ffff:127.0.0.0/104"],
+    ["0.0.0.0/0", "::/0"],
+    None,
+    ["127.0.0.1", "10.0.0.0/8", "::1/128", "LocalHost"],
+]
+REJECTED = [
+    ["somewhere"],
+    ["example.com"],
+    ["300.1.1.1"],
+    ["10.0.0.0/33"],
+    [10],
+    [" 10.0.0.1"],
+    "10.0.0.0/8",
+    {"a": 1},
+    [["127.0.0.1"]],
+    ["127.0.0.1/255.0.0.0x"],
+    [None],
+    7,
+]
 
 
 def path_of(tmp_path):
@@ -182,7 +223,7 @@ def _answers_ping(port: int) -> bool:
         client.sendto(encode_message("/vibsynth/ping", (1,)), ("127.0.0.1", port))
         try:
             return decode_packet(client.recvfrom(65536)[0]).address == "/vibsynth/pong"
-        except socket.timeout:
+        except TimeoutError:
             return False
 
 
@@ -197,7 +238,7 @@ def test_allow_values_the_config_accepts_start_the_server(tmp_path, value):
         return
     assert value in ACCEPTED, f"the validator accepted {value!r}"
     server = osc_adapter.create(config, None, make_controller(1), None)
-    server.start()                                   # what the validator accepts, the server takes
+    server.start()  # what the validator accepts, the server takes
     try:
         allowed = parse_allow_list(value)
         assert _answers_ping(server.port) is (allowed is None or "127.0.0.1" in allowed)
@@ -209,9 +250,9 @@ def test_allow_list_membership():
     allow = parse_allow_list(["10.0.0.0/8", "::1", "192.168.1.7/24", "::ffff:172.16.0.0/108"])
     assert isinstance(allow, AllowList) and len(allow) == 4
     assert "10.200.3.4" in allow and "11.0.0.1" not in allow
-    assert "::ffff:10.1.2.3" in allow                # IPv4 client on an IPv6 socket
+    assert "::ffff:10.1.2.3" in allow  # IPv4 client on an IPv6 socket
     assert "192.168.1.200" in allow and "192.168.2.1" not in allow
-    assert "172.16.9.9" in allow                     # a mapped network is an IPv4 network
+    assert "172.16.9.9" in allow  # a mapped network is an IPv4 network
     assert "::1" in allow and "::2" not in allow
     assert "not an address" not in allow and "" not in allow
     assert [str(n) for n in allow][:1] == ["10.0.0.0/8"]
@@ -256,7 +297,7 @@ def _closed_by_server(conn: socket.socket, timeout: float = 3.0) -> bool:
                 return True
     except (ConnectionResetError, BrokenPipeError):
         return True
-    except socket.timeout:
+    except TimeoutError:
         return False
 
 
@@ -308,7 +349,7 @@ def test_stalled_connections_from_one_peer_do_not_lock_out_others(tcp_server):
     stalled = [_connect(server.port) for _ in range(20)]
     try:
         for conn in stalled[:4:2]:
-            conn.sendall(b"\xc0/vibsynth/pi")                  # slowloris: a frame that never ends
+            conn.sendall(b"\xc0/vibsynth/pi")  # slowloris: a frame that never ends
         assert _wait_for(lambda: server.stats.tcp_refused == 16)
         assert server.tcp.connections == 4
         assert all(_closed_by_server(conn) for conn in stalled[4:])
@@ -328,12 +369,12 @@ def test_idle_connections_are_closed_and_the_peer_comes_back(tcp_server):
     active = _connect(server.port, source="127.0.0.2")
     _tcp_request(active, "/vibsynth/ping", 1, expect="/vibsynth/pong")
     clock.now += 20.0
-    _tcp_request(active, "/vibsynth/ping", 2, expect="/vibsynth/pong")    # a complete packet: idle time reset
-    clock.now += 20.0                                                        # 40 s for the stalled ones
+    _tcp_request(active, "/vibsynth/ping", 2, expect="/vibsynth/pong")  # a complete packet: idle time reset
+    clock.now += 20.0  # 40 s for the stalled ones
     assert _closed_by_server(silent) and _closed_by_server(partial)
     assert server.stats.tcp_idle_closed == 2
     assert _tcp_request(active, "/vibsynth/ping", 3, expect="/vibsynth/pong").args == (3,)
-    with _connect(server.port) as again:                                      # the same address after the timeout
+    with _connect(server.port) as again:  # the same address after the timeout
         assert _tcp_request(again, "/vibsynth/ping", 4, expect="/vibsynth/pong").args == (4,)
     for conn in (silent, partial, refused, active):
         conn.close()
@@ -344,20 +385,23 @@ def test_notify_subscriber_may_stay_silent_but_not_mid_frame(tcp_server):
     with _connect(server.port) as sub:
         _tcp_request(sub, "/vibsynth/notify", 1, expect="/vibsynth/done")
         clock.now += 100.0
-        time.sleep(0.6)                                                     # two sweeps of the idle check
+        time.sleep(0.6)  # two sweeps of the idle check
         server.controller.set_knob("intensity", 0.75, source="test")
         assert _tcp_request(sub, "/vibsynth/ping", 5, expect="/vibsynth/pong").args == (5,)
         sub.sendall(b"\xc0/vibsynth/pi")
         clock.now += 100.0
         assert _closed_by_server(sub)
     assert server.stats.tcp_idle_closed == 1
-    assert _wait_for(lambda: len(server.notifier) == 0)                     # a closed connection is unsubscribed
+    assert _wait_for(lambda: len(server.notifier) == 0)  # a closed connection is unsubscribed
 
 
 def test_tcp_limits_from_the_config(tmp_path):
     path = tmp_path / "c.yaml"
-    path.write_text("version: 1\nosc:\n  port: 0\n  tcp: true\n  tcp_max_connections: 9\n  tcp_max_per_peer: 2\n"
-                    "  tcp_idle_timeout_s: 5\n", encoding="utf-8")
+    path.write_text(
+        "version: 1\nosc:\n  port: 0\n  tcp: true\n  tcp_max_connections: 9\n  tcp_max_per_peer: 2\n"
+        "  tcp_idle_timeout_s: 5\n",
+        encoding="utf-8",
+    )
     server = osc_adapter.create(load_config(path, env={}), None, make_controller(1), None)
     assert (server.tcp.max_connections, server.tcp.max_per_peer, server.tcp.idle_timeout_s) == (9, 2, 5.0)
     path.write_text("version: 1\nosc:\n  tcp_max_per_peer: 0\n", encoding="utf-8")

@@ -1,5 +1,5 @@
-"""The MIDI adapter for ``vibsynth serve`` (contract of :mod:`vibsynth.control`): flags, ports, learn.
-"""
+"""The MIDI adapter for ``vibsynth serve`` (contract of :mod:`vibsynth.control`): flags, ports, learn."""
+
 from __future__ import annotations
 
 import argparse
@@ -20,14 +20,25 @@ log = logging.getLogger(__name__)
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the MIDI flags of ``vibsynth serve``."""
     group = parser.add_argument_group("MIDI")
-    group.add_argument("--midi", metavar="NAME|INDEX", default=None,
-                       help="open this MIDI input (name substring or index from `vibsynth devices`)")
-    group.add_argument("--midi-virtual", action="store_true",
-                       help=f"create a virtual MIDI input named {VIRTUAL_PORT_NAME!r} (ALSA, CoreMIDI, JACK)")
+    group.add_argument(
+        "--midi",
+        metavar="NAME|INDEX",
+        default=None,
+        help="open this MIDI input (name substring or index from `vibsynth devices`)",
+    )
+    group.add_argument(
+        "--midi-virtual",
+        action="store_true",
+        help=f"create a virtual MIDI input named {VIRTUAL_PORT_NAME!r} (ALSA, CoreMIDI, JACK)",
+    )
     group.add_argument("--no-midi", action="store_true", help="do not open any MIDI input")
-    group.add_argument("--learn", metavar="KNOB", choices=KNOBS, default=None,
-                       help="bind the next moved MIDI controller to KNOB (intensity|balance) "
-                            "and save it to the user config file")
+    group.add_argument(
+        "--learn",
+        metavar="KNOB",
+        choices=KNOBS,
+        default=None,
+        help="bind the next moved MIDI controller to KNOB (intensity|balance) and save it to the user config file",
+    )
 
 
 def list_inputs() -> list[str]:
@@ -39,7 +50,7 @@ def list_inputs() -> list[str]:
         return []
 
 
-def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any) -> "MidiServer | None":
+def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any) -> MidiServer | None:
     """Build (not start) the MIDI server from config and flags, or None (after one log line).
 
     Parameters
@@ -62,8 +73,10 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
     data = config.data
     section = data.get("midi") or {}
     if getattr(args, "no_midi", False) or not section.get("enabled", True):
-        log.info("running without MIDI: disabled (%s)", "--no-midi" if getattr(args, "no_midi", False)
-                 else "midi.enabled is false")
+        log.info(
+            "running without MIDI: disabled (%s)",
+            "--no-midi" if getattr(args, "no_midi", False) else "midi.enabled is false",
+        )
         return None
     port = getattr(args, "midi", None)
     port = section.get("port") if port is None else port
@@ -116,6 +129,6 @@ def learn(knob: str) -> bool:
     return bool(servers)
 
 
-def active_servers() -> list["MidiServer"]:
+def active_servers() -> list[MidiServer]:
     """The MIDI servers started and not yet stopped in this process."""
     return running_servers()

@@ -1,10 +1,11 @@
-"""MIDI settings: bindings (CC, 14-bit, NRPN), channel maps, and scaling raw values to knobs.
-"""
+"""MIDI settings: bindings (CC, 14-bit, NRPN), channel maps, and scaling raw values to knobs."""
+
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from vibsynth.errors import ConfigError, ParameterError
 
@@ -16,6 +17,7 @@ def check_learn_knob(knob: str) -> None:
     if knob not in KNOBS:
         raise ParameterError(f"cannot learn {knob!r}; knobs are {', '.join(KNOBS)}")
 
+
 # Controller numbers with a fixed meaning (never bound, never learned).
 CC_DATA_MSB, CC_DATA_LSB = 6, 38
 CC_DATA_INC, CC_DATA_DEC = 96, 97
@@ -23,10 +25,12 @@ CC_NRPN_LSB, CC_NRPN_MSB = 98, 99
 CC_RPN_LSB, CC_RPN_MSB = 100, 101
 CC_ALL_SOUND_OFF, CC_RESET_CONTROLLERS, CC_ALL_NOTES_OFF = 120, 121, 123
 _NOTES_OFF_CCS = frozenset({CC_ALL_SOUND_OFF, CC_ALL_NOTES_OFF, 124, 125, 126, 127})
-_PARAMETER_CCS = frozenset({CC_DATA_MSB, CC_DATA_LSB, CC_DATA_INC, CC_DATA_DEC,
-                            CC_NRPN_LSB, CC_NRPN_MSB, CC_RPN_LSB, CC_RPN_MSB})
-_REALTIME = frozenset({"clock", "start", "continue", "active_sensing", "songpos",
-                       "song_select", "quarter_frame", "tune_request"})
+_PARAMETER_CCS = frozenset(
+    {CC_DATA_MSB, CC_DATA_LSB, CC_DATA_INC, CC_DATA_DEC, CC_NRPN_LSB, CC_NRPN_MSB, CC_RPN_LSB, CC_RPN_MSB}
+)
+_REALTIME = frozenset(
+    {"clock", "start", "continue", "active_sensing", "songpos", "song_select", "quarter_frame", "tune_request"}
+)
 DEFAULT_NRPN = {"intensity": [1, 0], "balance": [1, 1]}
 
 
@@ -73,7 +77,7 @@ class Binding:
             out["invert"] = True
         return out
 
-    def same_source(self, other: "Binding") -> bool:
+    def same_source(self, other: Binding) -> bool:
         """Whether both listen to the same controller (ignoring the knob and range)."""
         return (self.cc, self.nrpn, self.channel) == (other.cc, other.nrpn, other.channel)
 
@@ -237,7 +241,7 @@ class MidiSettings:
     fade_s: float = 0.01
 
     @classmethod
-    def from_config(cls, data: Mapping[str, Any], channels: int) -> "MidiSettings":
+    def from_config(cls, data: Mapping[str, Any], channels: int) -> MidiSettings:
         """Build from the whole config dict (``config.data``) for an engine with ``channels`` outputs.
 
         Keys read with defaults when absent: ``midi.attack_ms`` (null),
@@ -254,8 +258,14 @@ class MidiSettings:
         if mode not in ("gate", "continuous"):
             raise ConfigError(f"midi.mode: expected gate or continuous, got {mode!r}")
 
-        def number(key: str, default: float | None, low: float, high: float, section: Mapping[str, Any] = midi,
-                   prefix: str = "midi") -> float | None:
+        def number(
+            key: str,
+            default: float | None,
+            low: float,
+            high: float,
+            section: Mapping[str, Any] = midi,
+            prefix: str = "midi",
+        ) -> float | None:
             value = section.get(key, default)
             if value is None:
                 return None

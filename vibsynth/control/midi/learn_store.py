@@ -1,16 +1,19 @@
-"""Saving learned MIDI bindings into the user's config file, keeping its comments and order.
-"""
+"""Saving learned MIDI bindings into the user's config file, keeping its comments and order."""
+
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from vibsynth.control.midi.bindings import KNOBS, Binding
 
 
 def user_config_path(explicit: str | os.PathLike[str] | None = None) -> Path:
-    """The config file MIDI learn writes to: ``--config`` if given, else the platform config folder's ``config.yaml``."""
+    """The config file MIDI learn writes to.
+
+    ``--config`` if given, else the platform config folder's ``config.yaml``.
+    """
     if explicit:
         return Path(explicit)
     try:
@@ -21,7 +24,9 @@ def user_config_path(explicit: str | os.PathLike[str] | None = None) -> Path:
         return Path.home() / ".config" / "vibsynth" / "config.yaml"
 
 
-def save_learned_mapping(path: str | os.PathLike[str], bindings: Iterable[Binding], knobs: Iterable[str] = KNOBS) -> None:
+def save_learned_mapping(
+    path: str | os.PathLike[str], bindings: Iterable[Binding], knobs: Iterable[str] = KNOBS
+) -> None:
     """Write ``midi.mapping.<knob>`` for ``knobs`` into a YAML file, keeping its comments and other keys.
 
     Uses ruamel.yaml round-trip mode through :func:`vibsynth.formats.yamlio.load_yaml` (the one YAML

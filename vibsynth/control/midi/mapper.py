@@ -45,12 +45,14 @@ keeps sounding until the last note held on it (from any MIDI channel) is
 released. This makes note stacking, MPE (one note per MIDI channel, several
 MIDI channels on one actuator) and overlapping channel maps behave the same.
 """
+
 from __future__ import annotations
 
 import time
 from collections import Counter
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Protocol, Sequence
+from typing import Any, Protocol
 
 import mido
 
@@ -80,11 +82,20 @@ class ControllerLike(Protocol):
     limits: Any
     channels: int
 
-    def set_knob(self, name: str, value: float, *, channels: Sequence[int] | None = None,
-                 at_frame: int | None = None, glide_s: float | None = None, source: str = "api") -> float: ...
+    def set_knob(
+        self,
+        name: str,
+        value: float,
+        *,
+        channels: Sequence[int] | None = None,
+        at_frame: int | None = None,
+        glide_s: float | None = None,
+        source: str = "api",
+    ) -> float: ...
 
-    def load_preset(self, name: str, *, channels: Sequence[int] | None = None,
-                    at_frame: int | None = None, source: str = "api") -> Any: ...
+    def load_preset(
+        self, name: str, *, channels: Sequence[int] | None = None, at_frame: int | None = None, source: str = "api"
+    ) -> Any: ...
 
     def panic(self, *, source: str = "api") -> None: ...
 
@@ -104,10 +115,10 @@ class _Note:
 @dataclass
 class _Actuator:
     held: list[_Note] = field(default_factory=list)
-    expression: float = 1.0          # gate mode: scales the note level
-    level: float | None = None       # continuous mode: intensity from CCs
+    expression: float = 1.0  # gate mode: scales the note level
+    level: float | None = None  # continuous mode: intensity from CCs
     base_balance: float | None = None
-    bend: float = 0.0                # balance offset (knob units)
+    bend: float = 0.0  # balance offset (knob units)
     sent: dict[str, float] = field(default_factory=dict)
 
 
@@ -115,7 +126,7 @@ class _Actuator:
 class _MidiChannel:
     msb: dict[int, int] = field(default_factory=dict)
     lsb_seen: set[int] = field(default_factory=set)
-    param: int | None = None         # active NRPN number; None = none or an RPN
+    param: int | None = None  # active NRPN number; None = none or an RPN
     data_msb: int = 0
     data_lsb_seen: set[int] = field(default_factory=set)
     nrpn_msb: int | None = None
@@ -153,8 +164,15 @@ class MidiMapper:
     :meth:`learn` (only sets a flag) and :meth:`release_all`.
     """
 
-    def __init__(self, controller: ControllerLike, settings: MidiSettings, *, presets: Any = None,
-                 source: str = "midi", clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        controller: ControllerLike,
+        settings: MidiSettings,
+        *,
+        presets: Any = None,
+        source: str = "midi",
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.controller = controller
         self.settings = settings
         self.presets = presets
@@ -438,8 +456,16 @@ class MidiMapper:
         for c in midi_channels:
             self._chan[c] = _MidiChannel()
 
-    def _apply(self, bindings: list[Binding], midi_channel: int, acts: tuple[int, ...], raw: int, top: int,
-               key: Any, at_frame: int | None) -> bool:
+    def _apply(
+        self,
+        bindings: list[Binding],
+        midi_channel: int,
+        acts: tuple[int, ...],
+        raw: int,
+        top: int,
+        key: Any,
+        at_frame: int | None,
+    ) -> bool:
         glide = self._cc_glide(midi_channel, key, at_frame)
         applied = False
         for b in bindings:
@@ -500,8 +526,9 @@ class MidiMapper:
         if every and at_frame is None:
             self.controller.panic(source=self.source)
         else:
-            self.controller.set_knob("intensity", 0.0, channels=targets, at_frame=at_frame,
-                                     glide_s=self.settings.fade_s, source=self.source)
+            self.controller.set_knob(
+                "intensity", 0.0, channels=targets, at_frame=at_frame, glide_s=self.settings.fade_s, source=self.source
+            )
 
     def release_all(self, acts: Iterable[int] | None = None, *, at_frame: int | None = None) -> tuple[int, ...]:
         """Release every held note (as if all note-offs arrived); return the actuators released.
@@ -555,8 +582,7 @@ class MidiMapper:
                 st.sent[knob] = value
                 groups.setdefault((value, g), []).append(a)
             for (value, g), chans in groups.items():
-                self.controller.set_knob(knob, value, channels=chans, at_frame=at_frame, glide_s=g,
-                                         source=self.source)
+                self.controller.set_knob(knob, value, channels=chans, at_frame=at_frame, glide_s=g, source=self.source)
                 self.driven.update(chans)
 
 

@@ -25,14 +25,16 @@ A named (non-virtual) port is checked every ``midi.reconnect_interval_s``
 notes on the channels it drove) and the port is reopened as soon as a port of
 that name reappears.
 """
+
 from __future__ import annotations
 
 import logging
 import os
 import threading
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import mido
 
@@ -43,17 +45,18 @@ from vibsynth.errors import DeviceError
 
 log = logging.getLogger(__name__)
 
-_ACTIVE: list["MidiServer"] = []
+_ACTIVE: list[MidiServer] = []
 _ACTIVE_LOCK = threading.Lock()
 
 
-def running_servers() -> list["MidiServer"]:
+def running_servers() -> list[MidiServer]:
     """The MIDI servers started in this process and not yet stopped."""
     with _ACTIVE_LOCK:
         return list(_ACTIVE)
 
+
 VIRTUAL_PORT_NAME = "vibsynth"
-POLL_S = 0.0005            # input thread sleep when the queue is empty
+POLL_S = 0.0005  # input thread sleep when the queue is empty
 
 
 def resolve_port_name(spec: str | int, names: Sequence[str]) -> str:
@@ -122,7 +125,7 @@ class MidiServer:
         self.reconnect_interval_s = max(0.05, float(reconnect_interval_s))
         self._open_input = open_input or self._mido_open
         self._input_names = input_names or (lambda: list(mido.get_input_names()))
-        self._lock = threading.Lock()            # mapper access: input thread vs watcher/learn
+        self._lock = threading.Lock()  # mapper access: input thread vs watcher/learn
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._port: Any = None
@@ -201,7 +204,9 @@ class MidiServer:
 
     def describe(self) -> str:
         """One line for the start-up banner."""
-        where = f"virtual input {VIRTUAL_PORT_NAME!r}" if self.virtual else f"input {self._port_name or self.port_spec!r}"
+        where = (
+            f"virtual input {VIRTUAL_PORT_NAME!r}" if self.virtual else f"input {self._port_name or self.port_spec!r}"
+        )
         backend = getattr(self._port, "_device_type", None) or str(getattr(mido, "backend", "")).split(" (")[0]
         learn = f", learning {self.mapper.learning}" if self.mapper.learning else ""
         return f"MIDI on {where} ({backend}), mode {self.mapper.settings.mode}{learn}"
@@ -298,6 +303,9 @@ class MidiServer:
         self.disconnects += 1
         with self._lock:
             released = self.mapper.release_all()
-        log.warning("MIDI input %r disconnected; released %d actuator channel(s); will reopen when it returns",
-                    self._port_name, len(released))
+        log.warning(
+            "MIDI input %r disconnected; released %d actuator channel(s); will reopen when it returns",
+            self._port_name,
+            len(released),
+        )
         self._close_port()

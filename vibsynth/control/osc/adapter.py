@@ -1,5 +1,5 @@
-"""The OSC adapter for ``vibsynth serve`` (contract of :mod:`vibsynth.control`): flags and construction.
-"""
+"""The OSC adapter for ``vibsynth serve`` (contract of :mod:`vibsynth.control`): flags and construction."""
+
 from __future__ import annotations
 
 import argparse
@@ -23,10 +23,19 @@ log = logging.getLogger(__name__)
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``--osc-port``, ``--osc-host`` and ``--no-osc`` to the ``vibsynth serve`` parser."""
     group = parser.add_argument_group("OSC")
-    group.add_argument("--osc-port", type=int, default=None, metavar="PORT",
-                       help="UDP port of the OSC server (default: osc.port, 9570)")
-    group.add_argument("--osc-host", default=None, metavar="HOST",
-                       help="address to listen on (default: osc.host, 127.0.0.1; 0.0.0.0 = every interface)")
+    group.add_argument(
+        "--osc-port",
+        type=int,
+        default=None,
+        metavar="PORT",
+        help="UDP port of the OSC server (default: osc.port, 9570)",
+    )
+    group.add_argument(
+        "--osc-host",
+        default=None,
+        metavar="HOST",
+        help="address to listen on (default: osc.host, 127.0.0.1; 0.0.0.0 = every interface)",
+    )
     group.add_argument("--no-osc", action="store_true", default=False, help="do not start the OSC server")
 
 
@@ -40,7 +49,9 @@ def _port(value: Any, key: str) -> int:
     return port
 
 
-def create(config: Any, args: argparse.Namespace | None, controller: Controller, presets: Any = None) -> OscServer | None:
+def create(
+    config: Any, args: argparse.Namespace | None, controller: Controller, presets: Any = None
+) -> OscServer | None:
     """Build (not start) the OSC server from the config and flags; None when disabled.
 
     Parameters
@@ -69,8 +80,10 @@ def create(config: Any, args: argparse.Namespace | None, controller: Controller,
     reply_port = osc.get("reply_port")
     reply_port = None if reply_port in (None, "", 0) else _port(reply_port, "osc.reply_port")
     speed = dict(data.get("speed") or {})
-    curve = SpeedCurve(speed.get("curve", [[0, 0.0], [10, 0.35], [50, 0.6], [150, 0.85], [300, 1.0]]),
-                       speed.get("balance_per_decade", 0.0) or 0.0)
+    curve = SpeedCurve(
+        speed.get("curve", [[0, 0.0], [10, 0.35], [50, 0.6], [150, 0.85], [300, 1.0]]),
+        speed.get("balance_per_decade", 0.0) or 0.0,
+    )
     try:
         horizon = float(osc.get("schedule_horizon_s", 10.0))
         rate = float(osc.get("notify_rate_hz", 30.0))
@@ -86,9 +99,18 @@ def create(config: Any, args: argparse.Namespace | None, controller: Controller,
     tcp_limits = _tcp_limits(osc)
     block = (data.get("audio") or {}).get("block_size")
     return OscServer(
-        controller, host=str(host), port=port, prefix=osc.get("prefix", "/vibsynth"), allow=allow,
-        reply_port=reply_port, schedule_horizon_s=horizon, notify_rate_hz=rate, tcp=bool(osc.get("tcp", False)),
-        speed_curve=curve, block_size=int(block) if isinstance(block, int) else None, **tcp_limits,
+        controller,
+        host=str(host),
+        port=port,
+        prefix=osc.get("prefix", "/vibsynth"),
+        allow=allow,
+        reply_port=reply_port,
+        schedule_horizon_s=horizon,
+        notify_rate_hz=rate,
+        tcp=bool(osc.get("tcp", False)),
+        speed_curve=curve,
+        block_size=int(block) if isinstance(block, int) else None,
+        **tcp_limits,
     )
 
 
@@ -101,8 +123,10 @@ def _tcp_limits(osc: dict) -> dict[str, Any]:
         For a value outside its range.
     """
     out: dict[str, Any] = {}
-    for key, default, low, high in (("tcp_max_connections", TCP_MAX_CONNECTIONS, 1, 1024),
-                                    ("tcp_max_per_peer", TCP_MAX_PER_PEER, 1, 1024)):
+    for key, default, low, high in (
+        ("tcp_max_connections", TCP_MAX_CONNECTIONS, 1, 1024),
+        ("tcp_max_per_peer", TCP_MAX_PER_PEER, 1, 1024),
+    ):
         value = osc.get(key, default)
         if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= high:
             raise ConfigError(f"osc.{key} {value!r} is not an integer in [{low}, {high}]")

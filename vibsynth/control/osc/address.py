@@ -18,11 +18,12 @@ therefore costs at most a few milliseconds against the whole table, whatever
 its shape (a translated regular expression backtracked exponentially on
 ``/vibsynth/******...x``). A pattern may lead to at most :data:`MAX_FANOUT` routes.
 """
+
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 from vibsynth.errors import ConfigError, ParameterError
 
@@ -54,8 +55,20 @@ work of one message should the table ever grow.
 """
 
 GLOBAL_METHODS = (
-    "intensity", "balance", "texture", "glide", "mute", "panic", "preset", "speed",
-    "get", "status", "ping", "sync", "notify", "learn",
+    "intensity",
+    "balance",
+    "texture",
+    "glide",
+    "mute",
+    "panic",
+    "preset",
+    "speed",
+    "get",
+    "status",
+    "ping",
+    "sync",
+    "notify",
+    "learn",
 )
 """Methods under ``{prefix}/``; they act on every channel (or on the server)."""
 
@@ -158,11 +171,11 @@ def _compile_part(part: str) -> tuple[Token, ...]:
             push(_ANY)
         elif c == "[":
             end = _closing(part, i, "]")
-            push(_SET, _char_set(part[i + 1:end]))
+            push(_SET, _char_set(part[i + 1 : end]))
             i = end
         elif c == "{":
             end = _closing(part, i, "}")
-            push(_CHOICE, tuple(sorted(set(part[i + 1:end].split(",")))))
+            push(_CHOICE, tuple(sorted(set(part[i + 1 : end].split(",")))))
             i = end
         elif c in "]}":
             raise ParameterError(f"unbalanced '{c}' in address pattern")
@@ -250,7 +263,8 @@ class AddressPattern:
         """Does the pattern match the whole concrete ``address``?"""
         texts = address.split("/")
         return len(texts) == len(self.parts) and all(
-            _match_part(tokens, text) for tokens, text in zip(self.parts, texts))
+            _match_part(tokens, text) for tokens, text in zip(self.parts, texts)
+        )
 
 
 def compile_pattern(pattern: str) -> AddressPattern:
@@ -344,12 +358,15 @@ class AddressSpace:
         found: list[Route] = []
         self._walk(pattern, self._tree, 0, {}, found)
         if len(found) > self.max_fanout:
-            raise ParameterError(f"address pattern matches {len(found)} addresses, more than the limit of "
-                                 f"{self.max_fanout}; nothing was done")
+            raise ParameterError(
+                f"address pattern matches {len(found)} addresses, more than the limit of "
+                f"{self.max_fanout}; nothing was done"
+            )
         return tuple(found)
 
-    def _walk(self, pattern: AddressPattern, node: dict, index: int, seen: dict[tuple[int, str], bool],
-              found: list[Route]) -> None:
+    def _walk(
+        self, pattern: AddressPattern, node: dict, index: int, seen: dict[tuple[int, str], bool], found: list[Route]
+    ) -> None:
         """Collect (in table order) the routes below ``node`` matching pattern parts ``index..``."""
         if index == len(pattern.parts):
             route = node.get(None)

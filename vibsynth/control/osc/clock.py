@@ -1,9 +1,10 @@
-"""Stream clock: OSC timetags (NTP time) -> engine stream frames.
-"""
+"""Stream clock: OSC timetags (NTP time) -> engine stream frames."""
+
 from __future__ import annotations
 
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 
 class StreamClock:
@@ -17,8 +18,9 @@ class StreamClock:
     handler samples it with every batch of packets it receives.
     """
 
-    def __init__(self, engine: Any, *, drift: float = 1e-3, reset_s: float = 0.25,
-                 wall: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self, engine: Any, *, drift: float = 1e-3, reset_s: float = 0.25, wall: Callable[[], float] = time.time
+    ) -> None:
         self.engine = engine
         self.drift = drift
         self.reset_s = reset_s

@@ -9,13 +9,14 @@ bound on nested bundles and leak ``UnicodeDecodeError``; this one cannot.)
 
 Timetags are kept as raw 64-bit NTP values; :data:`IMMEDIATE` (1) means "now".
 """
+
 from __future__ import annotations
 
 import math
 import struct
 import time
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Iterator, Sequence, Union
 
 from vibsynth.errors import ParameterError
 
@@ -85,7 +86,7 @@ class Bundle:
     elements: tuple
 
 
-Packet = Union[Message, Bundle]
+Packet = Message | Bundle
 
 
 def ntp_to_unix(timetag: int) -> float:
@@ -158,7 +159,7 @@ def _decode_message(data: bytes) -> Message:
             end = start + ((size + 3) & ~3)
             if end > len(data):
                 raise MalformedPacket("blob truncated")
-            value = bytes(data[start:start + size])
+            value = bytes(data[start : start + size])
         elif tag == "c":
             end = _fixed(data, index, 4, tag)
             code = _I32.unpack_from(data, index)[0]
@@ -219,7 +220,7 @@ def _decode(data: bytes, depth: int) -> Packet:
             index += 4
             if size <= 0 or size & 3 or index + size > size_total:
                 raise MalformedPacket(f"bad bundle element size {size}")
-            elements.append(_decode(data[index:index + size], depth + 1))
+            elements.append(_decode(data[index : index + size], depth + 1))
             index += size
         return Bundle(timetag, tuple(elements))
     raise MalformedPacket("neither a message ('/') nor a bundle ('#bundle')")
@@ -273,7 +274,10 @@ def _pad_string(text: str) -> bytes:
 
 
 def infer_types(args: Sequence[object]) -> str:
-    """OSC type tags for Python values: int -> i (h beyond 32 bits), float -> f, str -> s, bytes -> b, bool -> T/F, None -> N."""
+    """OSC type tags for Python values.
+
+    int -> i (h beyond 32 bits), float -> f, str -> s, bytes -> b, bool -> T/F, None -> N.
+    """
     tags = []
     for arg in args:
         if isinstance(arg, bool):

@@ -9,10 +9,12 @@ The controller learns of fast-path moves through :meth:`Controller.record` befor
 handler sees the next Python batch and at most 20 ms later otherwise, so ``get``,
 ``/status`` and ``/notify`` stay right.
 """
+
 from __future__ import annotations
 
 import ipaddress
-from typing import Any, Callable, Iterable
+from collections.abc import Callable, Iterable
+from typing import Any
 
 from vibsynth.control.controller import Controller
 from vibsynth.control.osc import _fast as _oscfast
@@ -72,5 +74,6 @@ def make_receiver(
     def on_state(updates: list[tuple[str, int, float]], last_seq: int) -> None:
         controller.record(updates, last_seq, source=SOURCE)
 
-    return _oscfast.Receiver(fd, core, fast_table(space), limits.balance_min, limits.balance_max, on_slow,
-                             on_state, allow_networks(allow))
+    return _oscfast.Receiver(
+        fd, core, fast_table(space), limits.balance_min, limits.balance_max, on_slow, on_state, allow_networks(allow)
+    )

@@ -13,14 +13,16 @@ Layers (each its own module, tests use each without a socket):
 The service calls :func:`add_arguments` and :func:`create` (adapter contract of
 :mod:`vibsynth.control`).
 """
+
 from __future__ import annotations
 
 import logging
 import math
 import threading
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any
 
 from vibsynth import __version__
 from vibsynth.control.controller import Controller, KnobEvent, check_finite, check_range
@@ -69,8 +71,8 @@ class OscStats:
     malformed: int = 0
     errors: int = 0
     error_replies_suppressed: int = 0
-    replies_truncated: int = 0   # error replies cut to the UDP reply budget
-    replies_dropped: int = 0     # replies not sent: over the UDP reply budget
+    replies_truncated: int = 0  # error replies cut to the UDP reply budget
+    replies_dropped: int = 0  # replies not sent: over the UDP reply budget
 
 
 class _TokenBucket:
@@ -175,10 +177,20 @@ class OscHandler:
         self._error_bucket = _TokenBucket(error_reply_rate)
         self._error_address = f"{self.prefix}/error"
         self._methods: dict[str, Callable[[Message, tuple[int, ...] | None, PeerLike, int | None], None]] = {
-            "intensity": self._on_intensity, "balance": self._on_balance, "texture": self._on_texture,
-            "glide": self._on_glide, "mute": self._on_mute, "panic": self._on_panic, "preset": self._on_preset,
-            "speed": self._on_speed, "get": self._on_get, "status": self._on_status, "ping": self._on_ping,
-            "sync": self._on_sync, "notify": self._on_notify, "learn": self._on_learn,
+            "intensity": self._on_intensity,
+            "balance": self._on_balance,
+            "texture": self._on_texture,
+            "glide": self._on_glide,
+            "mute": self._on_mute,
+            "panic": self._on_panic,
+            "preset": self._on_preset,
+            "speed": self._on_speed,
+            "get": self._on_get,
+            "status": self._on_status,
+            "ping": self._on_ping,
+            "sync": self._on_sync,
+            "notify": self._on_notify,
+            "learn": self._on_learn,
         }
         # balance set by anything but /speed: the base that the speed shift is added to
         self._base_balance = [s.balance for s in controller.state()]
@@ -303,8 +315,10 @@ class OscHandler:
         if ahead <= 0.0:
             return None
         if ahead > self.horizon_s:
-            return (f"timetag is {ahead:.3g} s ahead, beyond the schedule horizon of {self.horizon_s:g} s "
-                    "(osc.schedule_horizon_s); message rejected")
+            return (
+                f"timetag is {ahead:.3g} s ahead, beyond the schedule horizon of {self.horizon_s:g} s "
+                "(osc.schedule_horizon_s); message rejected"
+            )
         frame, current = self.clock.frame_at(when)
         if frame <= current:
             return None
@@ -353,9 +367,14 @@ class OscHandler:
         if budget.refused:
             return
         budget.refused = True
-        self._error(budget, budget.request, f"reply of {size} bytes not sent: replies to a UDP client on another "
-                    f"host total at most {REPLY_AMPLIFICATION}x the request ({budget.limit} bytes); use TCP "
-                    "(osc.tcp) or a longer request", "osc.reply_limit")
+        self._error(
+            budget,
+            budget.request,
+            f"reply of {size} bytes not sent: replies to a UDP client on another "
+            f"host total at most {REPLY_AMPLIFICATION}x the request ({budget.limit} bytes); use TCP "
+            "(osc.tcp) or a longer request",
+            "osc.reply_limit",
+        )
 
     def _reply(self, peer: PeerLike, address: str, args: Sequence[object] = (), types: str | None = None) -> None:
         peer.send(encode_message(address, args, types))
@@ -369,7 +388,9 @@ class OscHandler:
     def _set_knob(self, name: str, value: float, channels, at_frame) -> None:
         if self._batching and at_frame is None:
             value = self.controller.validate_knob(name, value)
-            self._defer((name, channels), lambda: self.controller.set_knob(name, value, channels=channels, source=SOURCE))
+            self._defer(
+                (name, channels), lambda: self.controller.set_knob(name, value, channels=channels, source=SOURCE)
+            )
         else:
             self.controller.set_knob(name, value, channels=channels, at_frame=at_frame, source=SOURCE)
 
@@ -387,8 +408,10 @@ class OscHandler:
         if self._batching and at_frame is None:
             self.controller.validate_knob("intensity", intensity)
             self.controller.validate_knob("balance", balance)
-            self._defer(("texture", channels), lambda: self.controller.set_texture(
-                intensity, balance, channels=channels, source=SOURCE))
+            self._defer(
+                ("texture", channels),
+                lambda: self.controller.set_texture(intensity, balance, channels=channels, source=SOURCE),
+            )
         else:
             self.controller.set_texture(intensity, balance, channels=channels, at_frame=at_frame, source=SOURCE)
 
@@ -429,8 +452,9 @@ class OscHandler:
                 group = tuple(c for c, b in bases.items() if b == value)
                 target = min(max(value + shift, limits.balance_min), limits.balance_max)
                 self.controller.set_knob("balance", target, channels=group, at_frame=at_frame, source=SPEED_SOURCE)
-            self.controller.set_knob("intensity", curve.intensity(speed), channels=channels,
-                                     at_frame=at_frame, source=SOURCE)
+            self.controller.set_knob(
+                "intensity", curve.intensity(speed), channels=channels, at_frame=at_frame, source=SOURCE
+            )
             return
         self._set_knob("intensity", curve.intensity(speed), channels, at_frame)
 
@@ -448,8 +472,15 @@ class OscHandler:
             s = states[ch]
             if name == "texture":
                 return (s.intensity, s.balance)
-            return ({"intensity": s.intensity, "balance": s.balance, "glide": s.glide_s,
-                     "mute": s.muted, "preset": s.preset}[name],)
+            return (
+                {
+                    "intensity": s.intensity,
+                    "balance": s.balance,
+                    "glide": s.glide_s,
+                    "mute": s.muted,
+                    "preset": s.preset,
+                }[name],
+            )
 
         per_channel = {ch: values(ch) for ch in chans}
         if channels is None and len(set(per_channel.values())) == 1:
@@ -471,7 +502,10 @@ class OscHandler:
             ("version", __version__),
             ("channels", int(ctl.channels)),
             ("rate", float(getattr(engine, "fs", -1.0))),
-            ("block_size", int(_engine_stat(engine, ("block_size", "blocksize", "block_frames"), self.block_size or -1))),
+            (
+                "block_size",
+                int(_engine_stat(engine, ("block_size", "blocksize", "block_frames"), self.block_size or -1)),
+            ),
             ("underflows", int(_engine_stat(engine, ("underflows", "xruns", "underruns"), -1))),
             ("load", float(_engine_stat(engine, ("render_load", "load_avg", "load", "cpu_load"), -1.0))),
             ("load_peak", float(_engine_stat(engine, ("load_peak",), -1.0))),
@@ -490,15 +524,21 @@ class OscHandler:
         # "device lost" with the reason while it is retried.
         output = getattr(ctl, "output", None)
         if output is not None:
-            pairs += [("output", str(getattr(output, "state", ""))),
-                      ("output_reason", str(getattr(output, "state_reason", "")))]
+            pairs += [
+                ("output", str(getattr(output, "state", ""))),
+                ("output_reason", str(getattr(output, "state_reason", ""))),
+            ]
         if self.extra_status is not None:
             pairs.extend(self.extra_status())
         pairs += [("replies_truncated", self.stats.replies_truncated), ("replies_dropped", self.stats.replies_dropped)]
         for ch, s in enumerate(ctl.state()):
-            pairs += [(f"ch{ch + 1}.intensity", float(s.intensity)), (f"ch{ch + 1}.balance", float(s.balance)),
-                      (f"ch{ch + 1}.glide", float(s.glide_s * 1000.0)), (f"ch{ch + 1}.mute", int(s.muted)),
-                      (f"ch{ch + 1}.preset", s.preset or "")]
+            pairs += [
+                (f"ch{ch + 1}.intensity", float(s.intensity)),
+                (f"ch{ch + 1}.balance", float(s.balance)),
+                (f"ch{ch + 1}.glide", float(s.glide_s * 1000.0)),
+                (f"ch{ch + 1}.mute", int(s.muted)),
+                (f"ch{ch + 1}.preset", s.preset or ""),
+            ]
         return pairs
 
     def _on_status(self, msg: Message, channels, peer, at_frame) -> None:
@@ -532,8 +572,12 @@ class OscHandler:
         if ok:
             self._reply(peer, f"{self.prefix}/synced", (sync_id,), "i")
         else:
-            self._error(peer, f"{self.prefix}/sync", f"engine did not apply the commands before sync {sync_id} in time",
-                        "osc.sync_timeout")
+            self._error(
+                peer,
+                f"{self.prefix}/sync",
+                f"engine did not apply the commands before sync {sync_id} in time",
+                "osc.sync_timeout",
+            )
 
     def _on_notify(self, msg: Message, channels, peer, at_frame) -> None:
         _arg_count(msg, (1,), "1 = subscribe, 0 = unsubscribe")

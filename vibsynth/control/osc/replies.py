@@ -1,11 +1,11 @@
-"""Replies to OSC senders: loopback test, reply budget against amplification, path redaction.
-"""
+"""Replies to OSC senders: loopback test, reply budget against amplification, path redaction."""
+
 from __future__ import annotations
 
 import functools
 import ipaddress
 import re
-from typing import Callable
+from collections.abc import Callable
 
 from vibsynth.control.osc.address import GLOBAL_METHODS
 from vibsynth.control.osc.workers import PeerLike
@@ -52,6 +52,7 @@ def redact_paths(text: str, prefix: str = "/vibsynth") -> str:
     folders); ``/home/ana/.config/vibsynth/presets/x.yaml:3: ...`` becomes ``x.yaml:3: ...``.
     OSC addresses under ``prefix`` (e.g. ``/vibsynth/ch/1/intensity``) are kept.
     """
+
     def replace(match: re.Match[str]) -> str:
         token = match.group(0)
         if _is_osc_address(token, prefix):
@@ -77,8 +78,8 @@ def fit_osc_string(text: str, size: int) -> str:
     if len(raw) <= limit:
         return text
     if limit < 3:
-        return raw[:max(limit, 0)].decode("utf-8", "ignore")
-    return raw[:limit - 3].decode("utf-8", "ignore") + "..."
+        return raw[: max(limit, 0)].decode("utf-8", "ignore")
+    return raw[: limit - 3].decode("utf-8", "ignore") + "..."
 
 
 class ReplyBudget:
@@ -96,7 +97,7 @@ class ReplyBudget:
 
     __slots__ = ("peer", "limit", "room", "request", "refused", "_on_refused")
 
-    def __init__(self, peer: PeerLike, limit: int, on_refused: Callable[["ReplyBudget", int], None]) -> None:
+    def __init__(self, peer: PeerLike, limit: int, on_refused: Callable[[ReplyBudget, int], None]) -> None:
         self.peer = peer
         self.limit = limit
         self.room = limit

@@ -1,10 +1,10 @@
-"""The OSC server: a handler behind its transports, with the notify and sync workers.
-"""
+"""The OSC server: a handler behind its transports, with the notify and sync workers."""
+
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from functools import partial
-from typing import Sequence
 
 from vibsynth.control.controller import Controller
 from vibsynth.control.osc.address import normalize_prefix
@@ -71,17 +71,40 @@ class OscServer:
         self.notifier = Notifier(controller, prefix, rate_hz=notify_rate_hz)
         self.sync_worker = SyncWorker(controller, self._reply_synced, timeout_s=schedule_horizon_s + 2.0)
         self.handler = OscHandler(
-            controller, prefix=prefix, speed_curve=speed_curve, schedule_horizon_s=schedule_horizon_s,
-            notifier=self.notifier, sync_worker=self.sync_worker, block_size=block_size,
+            controller,
+            prefix=prefix,
+            speed_curve=speed_curve,
+            schedule_horizon_s=schedule_horizon_s,
+            notifier=self.notifier,
+            sync_worker=self.sync_worker,
+            block_size=block_size,
             extra_status=self._status_extras,
         )
-        self.udp = UdpTransport(host, port, self.handler.handle_batch, allow=allow_set, reply_port=reply_port,
-                                rcvbuf=rcvbuf, stats=self.stats,
-                                receiver_factory=partial(make_receiver, controller=controller, space=self.handler.space))
-        self.tcp = (TcpSlipTransport(host, port, self.handler.handle_batch, allow=allow_set, stats=self.stats,
-                                     on_close=self.notifier.unsubscribe, max_connections=tcp_max_connections,
-                                     max_per_peer=tcp_max_per_peer, idle_timeout_s=tcp_idle_timeout_s)
-                    if tcp else None)
+        self.udp = UdpTransport(
+            host,
+            port,
+            self.handler.handle_batch,
+            allow=allow_set,
+            reply_port=reply_port,
+            rcvbuf=rcvbuf,
+            stats=self.stats,
+            receiver_factory=partial(make_receiver, controller=controller, space=self.handler.space),
+        )
+        self.tcp = (
+            TcpSlipTransport(
+                host,
+                port,
+                self.handler.handle_batch,
+                allow=allow_set,
+                stats=self.stats,
+                on_close=self.notifier.unsubscribe,
+                max_connections=tcp_max_connections,
+                max_per_peer=tcp_max_per_peer,
+                idle_timeout_s=tcp_idle_timeout_s,
+            )
+            if tcp
+            else None
+        )
         self._started = False
 
     def _reply_synced(self, peer: PeerLike, sync_id: int, ok: bool) -> None:
@@ -95,14 +118,25 @@ class OscServer:
         """Transport counters of both transports: the TCP ones in :attr:`stats`, the UDP ones in
         the compiled receive loop (``fast_path``: messages it handled without Python)."""
         s, udp = self.stats, self.udp.counters()
-        return {"packets": s.packets + udp.get("packets", 0), "bytes": s.bytes + udp.get("bytes", 0),
-                "denied": s.denied + udp.get("denied", 0), "fast_path": udp.get("fast", 0),
-                "replies": s.replies, "send_errors": s.send_errors}
+        return {
+            "packets": s.packets + udp.get("packets", 0),
+            "bytes": s.bytes + udp.get("bytes", 0),
+            "denied": s.denied + udp.get("denied", 0),
+            "fast_path": udp.get("fast", 0),
+            "replies": s.replies,
+            "send_errors": s.send_errors,
+        }
 
     def _transport_status(self) -> list[tuple[str, object]]:
         c = self.counters()
-        return [("packets", c["packets"]), ("denied", c["denied"]), ("fast_path", c["fast_path"]),
-                ("replies", c["replies"]), ("send_errors", c["send_errors"]), ("rcvbuf", self.udp.rcvbuf)]
+        return [
+            ("packets", c["packets"]),
+            ("denied", c["denied"]),
+            ("fast_path", c["fast_path"]),
+            ("replies", c["replies"]),
+            ("send_errors", c["send_errors"]),
+            ("rcvbuf", self.udp.rcvbuf),
+        ]
 
     @property
     def port(self) -> int:
@@ -124,8 +158,10 @@ class OscServer:
                 self.tcp.open()
         except OSError as exc:
             self.udp.stop()
-            raise ConfigError(f"OSC: cannot listen on {self.udp.host}:{self.udp.port}: {exc.strerror or exc} "
-                              "(set osc.port or --osc-port)") from None
+            raise ConfigError(
+                f"OSC: cannot listen on {self.udp.host}:{self.udp.port}: {exc.strerror or exc} "
+                "(set osc.port or --osc-port)"
+            ) from None
         self.notifier.start()
         self.sync_worker.start()
         self.udp.start()

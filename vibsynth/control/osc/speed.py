@@ -1,10 +1,10 @@
-"""The speed curve: finger speed (mm/s) -> intensity, for ``/vibsynth/ch/{n}/speed``.
-"""
+"""The speed curve: finger speed (mm/s) -> intensity, for ``/vibsynth/ch/{n}/speed``."""
+
 from __future__ import annotations
 
 import bisect
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 from vibsynth.errors import ConfigError
 

@@ -16,6 +16,7 @@ without a complete packet, so stalled clients cannot lock others out. The allow-
 is parsed by :func:`parse_allow_list`, the very function that validates ``osc.allow``
 in the config, so a config that passes always starts the server.
 """
+
 from __future__ import annotations
 
 import logging
@@ -23,8 +24,9 @@ import selectors
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from vibsynth.control.osc.fast import make_receiver
 from vibsynth.settings.allow_list import AllowList
@@ -86,7 +88,7 @@ class UdpPeer:
 
     address: tuple[str, int]
     reply_to: tuple[str, int]
-    transport: "UdpTransport" = field(compare=False, hash=False, repr=False)
+    transport: UdpTransport = field(compare=False, hash=False, repr=False)
     datagram = True  # replies to off-host peers are size-limited (OscHandler)
 
     @property
@@ -482,8 +484,11 @@ class TcpSlipTransport:
             if entry.peer.keep_alive and not entry.decoder.pending:
                 continue
             self.stats.tcp_idle_closed += 1
-            log.debug("OSC: closed the TCP connection of %s (no complete packet for %.0f s)",
-                      entry.peer.address[0], now - entry.last_packet)
+            log.debug(
+                "OSC: closed the TCP connection of %s (no complete packet for %.0f s)",
+                entry.peer.address[0],
+                now - entry.last_packet,
+            )
             self._drop(conn)
 
     def _receive(self, conn: socket.socket) -> None:

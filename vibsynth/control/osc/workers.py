@@ -10,14 +10,16 @@ caught up never delays incoming messages.
 * :class:`SyncWorker` answers ``/sync id`` with ``/synced id`` once the engine has
   applied every command submitted before it, in the order the requests arrived.
 """
+
 from __future__ import annotations
 
 import logging
 import queue
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from typing import Protocol
 
 from vibsynth.control.controller import Controller, KnobEvent
 from vibsynth.control.osc.codec import IMMEDIATE, encode_bundle, encode_message
@@ -104,8 +106,14 @@ class Notifier:
         """Add a peer (idempotent) and queue the full current state for it; False if full."""
         snapshot = {}
         for ch, state in enumerate(self.controller.state()):
-            snapshot.update({(ch, "intensity"): state.intensity, (ch, "balance"): state.balance,
-                             (ch, "glide"): state.glide_s, (ch, "mute"): state.muted})
+            snapshot.update(
+                {
+                    (ch, "intensity"): state.intensity,
+                    (ch, "balance"): state.balance,
+                    (ch, "glide"): state.glide_s,
+                    (ch, "mute"): state.muted,
+                }
+            )
             if state.preset is not None:
                 snapshot[(ch, "preset")] = state.preset
         with self._cond:
@@ -198,7 +206,9 @@ class SyncWorker:
         Give up (error reply) when the engine has not caught up after this long.
     """
 
-    def __init__(self, controller: Controller, reply: Callable[[PeerLike, int, bool], None], *, timeout_s: float = 12.0) -> None:
+    def __init__(
+        self, controller: Controller, reply: Callable[[PeerLike, int, bool], None], *, timeout_s: float = 12.0
+    ) -> None:
         self.controller = controller
         self.reply = reply
         self.timeout_s = timeout_s
