@@ -103,7 +103,7 @@ RECEIVER = textwrap.dedent("""
     import numpy as np
     from types import SimpleNamespace
     from vibsynth.settings.config import default_config_data
-    from vibsynth.control import midi
+    from vibsynth.control.midi import adapter as midi
     from vibsynth.control.controller import Controller
     from vibsynth.engine.bank import BankSpec, build_bank
     from vibsynth.engine.engine import Engine
