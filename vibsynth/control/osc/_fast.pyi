@@ -1,0 +1,24 @@
+"""Type stub of the compiled OSC receive loop (``vibsynth/control/osc/_fast.c``)."""
+
+from collections.abc import Callable, Sequence
+
+M_INTENSITY: int
+M_BALANCE: int
+M_TEXTURE: int
+MAX_BATCH: int
+
+class Receiver:
+    def __init__(
+        self,
+        fd: int,
+        core: object,
+        table: Sequence[tuple[bytes, int, int]],
+        balance_min: float,
+        balance_max: float,
+        on_slow: Callable[..., object],
+        on_state: Callable[..., object],
+        allow: Sequence[tuple[int, bytes, int]],
+    ) -> None: ...
+    def run(self) -> None: ...
+    def stop(self) -> None: ...
+    def counters(self) -> dict[str, int]: ...
