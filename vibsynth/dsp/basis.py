@@ -78,7 +78,7 @@ def normalise_db(band_db: ArrayLike) -> NDArray[np.float64]:
         Zero mean along the last axis.
     """
     arr = np.asarray(band_db, dtype=np.float64)
-    return arr - arr.mean(axis=-1, keepdims=True)
+    return np.asarray(arr - arr.mean(axis=-1, keepdims=True), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -133,7 +133,7 @@ class Basis:
     @property
     def v1(self) -> NDArray[np.float64]:
         """First component, shape (n_bands,)."""
-        return self.components[0]
+        return np.asarray(self.components[0], dtype=np.float64)
 
     @property
     def id(self) -> str:
@@ -156,7 +156,7 @@ class Basis:
         arr = np.asarray(band_db, dtype=np.float64)
         if arr.shape[-1] != self.n_bands:
             raise ParameterError(f"expected {self.n_bands} bands, got {arr.shape[-1]}")
-        return (normalise_db(arr) - self.mean_db) @ self.components.T
+        return np.asarray((normalise_db(arr) - self.mean_db) @ self.components.T, dtype=np.float64)
 
     def reconstruct(self, scores: ArrayLike, *, components: slice | None = None) -> NDArray[np.float64]:
         """Normalised dB spectrum ``M + sum_i t_i V_i`` over the chosen components.
@@ -361,7 +361,7 @@ def band_powers_from_psd(
     trapezoid[:-1] += 0.5 * np.diff(fine_f)
     weighted = bandpass_response(fine_f, centres=centres, order=order) * trapezoid  # (bands, fine)
     powers = fine_psd @ weighted.T
-    return powers.reshape(p.shape[:-1] + (np.asarray(centres).size,))
+    return np.asarray(powers.reshape(p.shape[:-1] + (np.asarray(centres).size,)), dtype=np.float64)
 
 
 def _orient(components: NDArray[np.float64], centres: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -373,7 +373,7 @@ def _orient(components: NDArray[np.float64], centres: NDArray[np.float64]) -> ND
     for i in range(1, out.shape[0]):
         if out[i][np.argmax(np.abs(out[i]))] < 0:
             out[i] = -out[i]
-    return out
+    return np.asarray(out, dtype=np.float64)
 
 
 def fit_basis(

@@ -235,7 +235,7 @@ class Trajectory:
 
     def centres_s(self) -> NDArray[np.float64]:
         """Window centres in seconds, shape (n_frames,)."""
-        return (np.arange(self.n_frames) * self.hop + self.window / 2.0) / self.fs
+        return np.asarray((np.arange(self.n_frames) * self.hop + self.window / 2.0) / self.fs, dtype=np.float64)
 
 
 def frame_count(n_samples: int, window: int, hop: int) -> int:
@@ -356,9 +356,9 @@ def _refine(
     can pull a few windows off; with the two segments' means fixed, the best local
     boundary assigns each nearby window to the mean it is closer to.
     """
-    runs = [list(r) for r in runs]
-    for i in range(1, len(runs)):
-        left, right = runs[i - 1], runs[i]
+    bounds = [list(r) for r in runs]
+    for i in range(1, len(bounds)):
+        left, right = bounds[i - 1], bounds[i]
         if left[1] != right[0]:
             continue  # separated by silence
         k = left[1]
@@ -376,7 +376,7 @@ def _refine(
             if cost < best - 1e-12:
                 best, best_k = cost, cand
         left[1] = right[0] = best_k
-    return [tuple(r) for r in runs]  # type: ignore[misc]
+    return [(r[0], r[1]) for r in bounds]
 
 
 def encode_trajectory(
@@ -464,6 +464,11 @@ def encode_trajectory(
 
 
 # --------------------------------------------------------------------------- quantisation
+def _f32(value: float) -> float:
+    """``value`` rounded to float32 (how the ``.vbt`` header stores ranges)."""
+    return float(np.float32(value))
+
+
 @dataclass(frozen=True)
 class Quantizer:
     """Uniform quantiser of (intensity, t1) with a silence code.
@@ -528,8 +533,7 @@ class Quantizer:
         loud = trajectory.level_db[np.isfinite(trajectory.level_db)]
         lr = level_range if level_range is not None else auto(loud) if loud.size else (-1.0, 0.0)
         tr = t1_range if t1_range is not None else auto(trajectory.t1)
-        f32 = lambda v: float(np.float32(v))  # noqa: E731
-        return cls(int(bits), f32(lr[0]), f32(lr[1]), f32(tr[0]), f32(tr[1]))
+        return cls(int(bits), _f32(lr[0]), _f32(lr[1]), _f32(tr[0]), _f32(tr[1]))
 
     def encode(self, level_db: ArrayLike, t1: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Codes of per-window values (clipped into the ranges).
@@ -560,7 +564,7 @@ class Quantizer:
         if np.any(lc < 0) or np.any(lc > self.max_code) or np.any(tc < 0) or np.any(tc > self.max_code):
             raise ParameterError(f"codes outside 0..{self.max_code}")
         level = np.where(lc == 0, -np.inf, self.level_lo + (lc - 1) * self.level_step)
-        return level, self.t1_lo + tc * self.t1_step
+        return np.asarray(level, dtype=np.float64), np.asarray(self.t1_lo + tc * self.t1_step, dtype=np.float64)
 
     def clipped(self, trajectory: Trajectory) -> int:
         """Windows whose values lie outside the ranges (coded at the range's edge)."""
@@ -748,7 +752,7 @@ def quality(
     dfs = fs if decoded_fs is None else decoded_fs
     a = validate_signal(original, fs=fs, min_seconds=window_s)
     b = validate_signal(decoded, fs=dfs, min_seconds=window_s) * 10.0 ** (offset_db / 20.0)
-    kw = dict(centres=basis.centres_hz, order=basis.filter_order)
+    kw: dict[str, Any] = dict(centres=basis.centres_hz, order=basis.filter_order)
     oa, ob = to_db(band_powers(a, fs=fs, **kw)), to_db(band_powers(b, fs=dfs, **kw))
     diff = ob - oa
     sa, sb = basis.scores(oa), basis.scores(ob)

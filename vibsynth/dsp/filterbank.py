@@ -219,7 +219,7 @@ def bin_powers(x: ArrayLike, *, fs: float) -> tuple[NDArray[np.float64], NDArray
     power[..., 0] *= 0.5
     if n % 2 == 0:
         power[..., -1] *= 0.5
-    return np.fft.rfftfreq(n, 1.0 / fs), power
+    return np.fft.rfftfreq(n, 1.0 / fs).astype(np.float64), np.asarray(power, dtype=np.float64)
 
 
 def _bin_chunks(n_bins: int) -> Iterator[slice]:
@@ -326,7 +326,7 @@ def frame_mean(values: NDArray[np.float64], *, window: int, hop: int) -> NDArray
         return np.zeros(0)
     cumulative = np.concatenate(([0.0], np.cumsum(values)))
     starts = np.arange(0, n - window + 1, hop)
-    return (cumulative[starts + window] - cumulative[starts]) / window
+    return np.asarray((cumulative[starts + window] - cumulative[starts]) / window, dtype=np.float64)
 
 
 def band_power_frames(

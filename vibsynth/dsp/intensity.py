@@ -79,7 +79,8 @@ def intensity_response(freqs: ArrayLike) -> NDArray[np.float64]:
         ``|H(f)|^2`` (1 at ``sqrt(80*200)`` Hz, 0.5 at 80 and 200 Hz, 0 at DC).
     """
     low, high = INTENSITY_BAND_HZ
-    return butterworth_bandpass(freqs, centre=math.sqrt(low * high), bandwidth=high - low, order=BUTTERWORTH_ORDER)[0]
+    response = butterworth_bandpass(freqs, centre=math.sqrt(low * high), bandwidth=high - low, order=BUTTERWORTH_ORDER)
+    return np.asarray(response[0], dtype=np.float64)
 
 
 def _to_db(power: float) -> float:
@@ -145,7 +146,7 @@ def gain_to_level(x: ArrayLike, *, fs: float, target_db: float) -> float:
     level = intensity_level_db(x, fs=fs)
     if level <= SILENCE_DB:
         raise ParameterError("signal has no power in the 80-200 Hz band: no gain can reach a level")
-    return 10.0 ** ((target_db - level) / 20.0)
+    return float(10.0 ** ((target_db - level) / 20.0))
 
 
 def _check_mapping(ceiling_db: float, range_db: float) -> None:

@@ -107,7 +107,7 @@ class SpectralShaper:
         self.n_samples = int(n_samples)
         self.centres = np.asarray(centres, dtype=np.float64)
         self.order = int(order)
-        self.freqs = np.fft.rfftfreq(self.n_samples, 1.0 / self.fs)
+        self.freqs = np.fft.rfftfreq(self.n_samples, 1.0 / self.fs).astype(np.float64)
         self._df = self.fs / self.n_samples
         # Log-frequency knots: the band centres plus one empty knot at each end.
         log_c = np.log(self.centres)
@@ -201,11 +201,11 @@ class SpectralShaper:
         target = 10.0 ** ((target_db - offset) / 10.0)
         weights, _ = nnls(self._gain_matrix, target, maxiter=50 * target.size)
         if level_db is None:
-            return weights * 10.0 ** (offset / 10.0)
+            return np.asarray(weights * 10.0 ** (offset / 10.0), dtype=np.float64)
         current = float(self._intensity_row @ weights)
         if current <= 0:
             raise ParameterError("target spectrum has no energy in the 80-200 Hz band")
-        return weights * 10.0 ** (level_db / 10.0) / current
+        return np.asarray(weights * 10.0 ** (level_db / 10.0) / current, dtype=np.float64)
 
     def weights_band_db(self, weights: ArrayLike) -> NDArray[np.float64]:
         """Band powers (dB) the analysis measures for bump weights (exact, no FFT).
@@ -218,7 +218,9 @@ class SpectralShaper:
         -------
         band_db : ndarray, shape (..., n_bands)
         """
-        return 10.0 * np.log10(np.maximum(np.asarray(weights) @ self._gain_matrix.T, 1e-300))
+        return np.asarray(
+            10.0 * np.log10(np.maximum(np.asarray(weights) @ self._gain_matrix.T, 1e-300)), dtype=np.float64
+        )
 
     def solve(self, band_db: ArrayLike, *, level_db: float | None = None) -> NDArray[np.float64]:
         """Per-bin power whose band powers follow ``band_db`` (see :meth:`solve_weights`).
@@ -323,7 +325,7 @@ class SpectralShaper:
         -------
         magnitude : ndarray, shape (..., n_bins)
         """
-        return np.sqrt(np.asarray(power, dtype=np.float64) / self._parseval)
+        return np.asarray(np.sqrt(np.asarray(power, dtype=np.float64) / self._parseval), dtype=np.float64)
 
     def random_phases(self, rng: np.random.Generator) -> NDArray[np.complex128]:
         """Unit phasors ``e^{i phi}`` (DC and Nyquist real).
@@ -336,7 +338,7 @@ class SpectralShaper:
         phasors[0] = 1.0
         if self.n_samples % 2 == 0:
             phasors[-1] = 1.0
-        return phasors
+        return np.asarray(phasors, dtype=np.complex128)
 
     def render(self, power: ArrayLike, phasors: NDArray[np.complex128]) -> NDArray[np.float64]:
         """One period of the shaped noise.
@@ -363,12 +365,14 @@ class SpectralShaper:
         -------
         band_db : ndarray, shape (..., n_bands)
         """
-        p = band_powers_from_bin_powers(self.freqs, np.asarray(power), centres=self.centres, order=self.order)
+        p = band_powers_from_bin_powers(
+            self.freqs, np.asarray(power, dtype=np.float64), centres=self.centres, order=self.order
+        )
         return 10.0 * np.log10(np.maximum(p, 1e-300))
 
     def level_db(self, power: ArrayLike) -> float:
         """Intensity level (dB) of per-bin powers, shape (n_bins,)."""
-        return intensity_level_from_bin_powers(self.freqs, np.asarray(power))
+        return intensity_level_from_bin_powers(self.freqs, np.asarray(power, dtype=np.float64))
 
 
 @dataclass(frozen=True)

@@ -107,7 +107,7 @@ class ActuatorResponse:
         db = np.array([p[1] for p in self.points])
         with np.errstate(divide="ignore"):
             log_f = np.log(np.where(f > 0, f, self.points[0][0]))
-        return np.interp(log_f, hz, db)
+        return np.asarray(np.interp(log_f, hz, db), dtype=np.float64)
 
     def inverse_gain(self, freqs: ArrayLike) -> NDArray[np.float64]:
         """Linear amplitude gain of the inverse equaliser, ``10^(min(-response, max_boost)/20)``.

@@ -51,7 +51,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -155,7 +155,7 @@ class NoiseBank:
     balances: NDArray[np.float64]
     peaks: NDArray[np.float64]
     fs: float
-    key: dict
+    key: dict[str, Any]
 
     @property
     def levels(self) -> int:
@@ -236,13 +236,13 @@ def default_cache_dir() -> Path:
         return Path(base) / "vibsynth" / "banks"
 
 
-def cache_path(cache_dir: Path, key: dict) -> Path:
+def cache_path(cache_dir: Path, key: dict[str, Any]) -> Path:
     """File name of a bank in a cache folder (hash of the key)."""
     digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
     return Path(cache_dir) / f"bank-{digest}.npz"
 
 
-def _read_cache(path: Path, key: dict, fs: float) -> NoiseBank:
+def _read_cache(path: Path, key: dict[str, Any], fs: float) -> NoiseBank:
     with np.load(path, allow_pickle=False) as data:
         stored_key = json.loads(str(data["key"]))
         if stored_key != json.loads(json.dumps(key)):

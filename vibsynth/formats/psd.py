@@ -62,7 +62,7 @@ def read_psd_table(path: str | os.PathLike[str]) -> PsdTable:
         raise InputError(f"{p}: no such file")
     opener = gzip.open if p.suffix == ".gz" else open
     try:
-        with opener(p, "rt", newline="", encoding="utf-8") as handle:  # type: ignore[operator]
+        with opener(p, "rt", newline="", encoding="utf-8") as handle:
             reader = csv.reader(handle)
             header = next(reader)
             freq_cols = [i for i, h in enumerate(header) if _is_number(h)]

@@ -40,12 +40,13 @@ class _GuardedComposer(Composer):
         self._anchor_lines: dict[str, int] = {}
 
     def compose_node(self, parent: Any, index: Any) -> Any:
-        event = self.peek_event()
+        event = self.peek_event()  # type: ignore[attr-defined]  # from the parser mixed in beside us
+        mark = event.start_mark
         if isinstance(event, yaml.AliasEvent):
-            line = self._anchor_lines.get(event.anchor)
+            line = self._anchor_lines.get(event.anchor or "")
             where = f" (anchor '&{event.anchor}' on line {line})" if line else ""
             raise _Refused(
-                f"{event.start_mark.line + 1}:{event.start_mark.column + 1}: YAML alias "
+                f"{mark.line + 1}:{mark.column + 1}: YAML alias "
                 f"'*{event.anchor}'{where}: aliases are not allowed in {self._what} (they can "
                 "expand a small file into gigabytes); write the value out instead"
             )
@@ -65,9 +66,9 @@ class _GuardedComposer(Composer):
 
 
 try:  # libyaml's parser when PyYAML was built with it (fast), else PyYAML's own
-    from yaml.cyaml import CParser as _CParser
+    from yaml.cyaml import CParser as _CParser  # type: ignore[attr-defined]
 
-    class _GuardedLoader(_GuardedComposer, _CParser, SafeConstructor, Resolver):  # type: ignore[misc]
+    class _GuardedLoader(_GuardedComposer, _CParser, SafeConstructor, Resolver):
         def __init__(self, text: str, what: str, max_depth: int) -> None:
             _CParser.__init__(self, text)
             Composer.__init__(self)
@@ -225,4 +226,4 @@ def dump_yaml(data: Any, **options: Any) -> str:
     ``options`` go to :func:`yaml.dump` (``sort_keys``, ``width``, ``default_flow_style``...).
     """
     options.setdefault("allow_unicode", True)
-    return yaml.dump(data, Dumper=_NoAliasDumper, **options)
+    return str(yaml.dump(data, Dumper=_NoAliasDumper, **options))
