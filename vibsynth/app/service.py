@@ -230,7 +230,7 @@ def serve(config: Any, args: Any, *, owns_process: bool = False) -> int:
     """
     stop = threading.Event()
     guard = ExitGuard(EXIT_DEADLINE_S) if owns_process else None
-    previous: dict[int, Any] = {}
+    previous: dict[signal.Signals, Any] = {}
 
     def on_signal(signum: int, frame: Any) -> None:  # no logging or locks here
         stop.set()

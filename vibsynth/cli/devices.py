@@ -31,10 +31,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {api['index']}: {api['name']}" + (f" (default output: {default})" if default >= 0 else ""))
     print("Output devices:" if devices else "Output devices: none (vibsynth serve will use the null output)")
     for d in devices:
-        api = apis[d["hostapi"]]["name"] if d["hostapi"] < len(apis) else "?"
+        api_name = apis[d["hostapi"]]["name"] if d["hostapi"] < len(apis) else "?"
         mark = "*" if any(a["default_output_device"] == d["index"] for a in apis) else " "
         print(
-            f" {mark}{d['index']:3d}: {d['name']}  [{api}, {d['max_output_channels']} out, "
+            f" {mark}{d['index']:3d}: {d['name']}  [{api_name}, {d['max_output_channels']} out, "
             f"{d['default_samplerate']:g} Hz, low latency {1000 * d['default_low_output_latency']:.1f} ms]"
         )
     try:

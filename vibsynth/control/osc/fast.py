@@ -46,7 +46,7 @@ def allow_networks(allow: Iterable[Any] | None) -> list[tuple[int, bytes, int]] 
     """
     if allow is None:
         return None
-    out = []
+    out: list[tuple[int, bytes, int]] = []
     for entry in allow:
         net = ipaddress.ip_network(entry if not isinstance(entry, str) else entry.split("%")[0], strict=False)
         out.append((net.version, net.network_address.packed, net.prefixlen))

@@ -286,7 +286,9 @@ class OscHandler:
             return
         if len(routes) == 1:
             route = routes[0]
-            calls = [(route.method, None if route.channel is None else (route.channel,))]
+            calls: list[tuple[str, tuple[int, ...] | None]] = [
+                (route.method, None if route.channel is None else (route.channel,))
+            ]
         else:
             calls = self.space.group(routes)
         for method, channels in calls:

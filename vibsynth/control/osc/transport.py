@@ -370,7 +370,7 @@ class TcpSlipTransport:
         max_per_peer: int = TCP_MAX_PER_PEER,
         idle_timeout_s: float = TCP_IDLE_TIMEOUT_S,
         stats: TransportStats | None = None,
-        on_close: Callable[[TcpPeer], None] | None = None,
+        on_close: Callable[[TcpPeer], object] | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.host = host

@@ -104,7 +104,7 @@ class Notifier:
 
     def subscribe(self, peer: PeerLike) -> bool:
         """Add a peer (idempotent) and queue the full current state for it; False if full."""
-        snapshot = {}
+        snapshot: dict[tuple[int, str], object] = {}
         for ch, state in enumerate(self.controller.state()):
             snapshot.update(
                 {
