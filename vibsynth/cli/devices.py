@@ -37,10 +37,8 @@ def run(args: argparse.Namespace) -> int:
             f" {mark}{d['index']:3d}: {d['name']}  [{api_name}, {d['max_output_channels']} out, "
             f"{d['default_samplerate']:g} Hz, low latency {1000 * d['default_low_output_latency']:.1f} ms]"
         )
-    try:
-        from vibsynth.control.midi.adapter import list_inputs
-    except ImportError:
-        return 0
+    from vibsynth.control.midi.adapter import list_inputs
+
     try:
         inputs = list_inputs()
     except Exception as exc:  # MIDI backend missing or failing: not fatal for a listing

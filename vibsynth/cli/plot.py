@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from vibsynth.cli._common import add_basis_argument, basis_from_args, sample_rate
-from vibsynth.errors import InputError, ParameterError, PresetError
+from vibsynth.errors import InputError, ParameterError
 
 ORDER = 60
 
@@ -76,12 +76,9 @@ def run_spectrum(args: argparse.Namespace) -> int:
 
 def run_presets(args: argparse.Namespace) -> int:
     from vibsynth.research.plots import plot_presets
+    from vibsynth.settings.config import load_config
+    from vibsynth.settings.library import load_library
 
-    try:
-        from vibsynth.settings.config import load_config
-        from vibsynth.settings.library import load_library
-    except ImportError:
-        raise PresetError("presets are not available in this version of vibsynth") from None
     library = load_library(load_config(args.config) if args.config else load_config())
     items = []
     for name in library.names():

@@ -227,13 +227,9 @@ def build_bank(basis: Basis, spec: BankSpec, *, progress: Progress | None = None
 
 def default_cache_dir() -> Path:
     """The platform cache folder for banks (``~/.cache/vibsynth/banks`` on Linux)."""
-    try:
-        import platformdirs
+    import platformdirs
 
-        return Path(platformdirs.user_cache_dir("vibsynth")) / "banks"
-    except ImportError:  # pragma: no cover
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        return Path(base) / "vibsynth" / "banks"
+    return Path(platformdirs.user_cache_dir("vibsynth")) / "banks"
 
 
 def cache_path(cache_dir: Path, key: dict[str, Any]) -> Path:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import struct
-import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
@@ -360,8 +359,3 @@ def encode_bundle(timetag: int, elements: Sequence[bytes]) -> bytes:
         parts.append(_I32.pack(len(element)))
         parts.append(element)
     return b"".join(parts)
-
-
-def now_ntp() -> int:
-    """The current wall time as an NTP timetag."""
-    return unix_to_ntp(time.time())
