@@ -323,3 +323,25 @@ def test_pathological_patterns_match_in_linear_time():
         lines.append(f"{len(pattern):4d} chars: {1e3 * elapsed:7.3f} ms (budget {1e3 * budget:.1f} ms)")
         assert elapsed < min(budget, 1.0), pattern
     print("\nplain match %.3f ms (64 channels); pathological patterns:\n  " % (1e3 * baseline) + "\n  ".join(lines))
+
+
+@pytest.mark.parametrize(
+    "channels, address, reason",
+    [
+        (1, "/vibsynth/ch/2/intensity", "channel 2 out of range (this server has 1 channel: 1..1)"),
+        (8, "/vibsynth/ch/9/texture", "channel 9 out of range (this server has 8 channels: 1..8)"),
+        (
+            1,
+            "/vibsynth/ch/99999999999999999999/get",
+            "channel 999999999999 out of range (this server has 1 channel: 1..1)",
+        ),
+        (1, "/vibsynth/balanse", "unknown address (did you mean .../balance?)"),
+        (1, "/vibsynth/ch/1/nothing", "unknown address"),
+        (1, "/other/ch/2/intensity", "unknown address"),
+        (1, "/vibsynth/ch/2/" + "x" * 5000, "unknown address"),
+    ],
+)
+def test_why_an_address_is_unknown(channels, address, reason):
+    space = AddressSpace("/vibsynth", channels)
+    assert space.match(address) == ()
+    assert space.why_unknown(address) == reason

@@ -21,6 +21,7 @@ its shape (a translated regular expression backtracked exponentially on
 
 from __future__ import annotations
 
+import difflib
 from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -311,6 +312,26 @@ class AddressSpace:
     def addresses(self) -> tuple[str, ...]:
         """Every concrete address, in table order."""
         return tuple(self._routes)
+
+    def why_unknown(self, address: str) -> str:
+        """Why an address (that matched nothing) is unknown, in words for the error reply.
+
+        ``/vibsynth/ch/2/intensity`` on a one-channel server is "channel 2 out of range (this
+        server has 1 channel)"; a method name that is close to a real one gets "did you mean";
+        anything else is "unknown address".
+        """
+        parts = address[len(self.prefix) :].split("/") if address.startswith(self.prefix + "/") else []
+        plural = "channel" if self.channels == 1 else "channels"
+        if len(parts) == 4 and parts[1] == "ch" and parts[3] in CHANNEL_METHODS and parts[2].isdigit():
+            n = int(parts[2][:12])
+            if not 1 <= n <= self.channels:
+                return f"channel {n} out of range (this server has {self.channels} {plural}: 1..{self.channels})"
+        method = parts[-1] if parts else ""
+        candidates = CHANNEL_METHODS if len(parts) == 4 and parts[1] == "ch" else GLOBAL_METHODS
+        close = difflib.get_close_matches(method, candidates, n=1, cutoff=0.75) if method.isascii() else []
+        if close and len(method) <= 32:
+            return f"unknown address (did you mean .../{close[0]}?)"
+        return "unknown address"
 
     def address_of(self, method: str, channel: int | None = None) -> str:
         """The concrete address of a method (``channel`` 0-based, None = global form)."""

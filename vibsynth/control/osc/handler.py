@@ -282,7 +282,7 @@ class OscHandler:
             self._error(peer, msg.address, str(exc), "osc.bad_pattern")
             return
         if not routes:
-            self._error(peer, msg.address, "unknown address", "osc.unknown_address")
+            self._error(peer, msg.address, self.space.why_unknown(msg.address), "osc.unknown_address")
             return
         if len(routes) == 1:
             route = routes[0]
