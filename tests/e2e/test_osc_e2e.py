@@ -563,3 +563,18 @@ def test_hundred_thousand_timetagged_bundles(jack_serve):
     assert bundles == sent  # none lost in the socket
     assert refused == sent - 10_000
     assert loaded <= baseline + MAX_UNDERFLOWS
+
+
+def test_liblo_oscsend_over_tcp_reaches_the_engine(limits_serve):
+    """liblo frames TCP with a length prefix (OSC 1.0); the server tells it from SLIP per connection."""
+    port, dump, _ = limits_serve
+    subprocess.run(
+        ["oscsend", f"osc.tcp://127.0.0.1:{port}", "/vibsynth/ch/1/intensity", "f", "0.375"], check=True, timeout=10
+    )
+    for _ in range(50):
+        if _dump_status(port, dump).get("ch1.intensity") == "0.375000":
+            break
+        time.sleep(0.05)
+    assert _dump_status(port, dump)["ch1.intensity"] == "0.375000"
+    with _tcp_connect(port, "127.0.0.1") as conn:
+        assert _tcp_ping(conn, 3)  # and a SLIP client still works beside it

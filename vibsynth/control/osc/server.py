@@ -17,7 +17,7 @@ from vibsynth.control.osc.transport import (
     TCP_IDLE_TIMEOUT_S,
     TCP_MAX_CONNECTIONS,
     TCP_MAX_PER_PEER,
-    TcpSlipTransport,
+    TcpTransport,
     TransportStats,
     UdpTransport,
 )
@@ -38,7 +38,7 @@ class OscServer:
     prefix, allow, reply_port, schedule_horizon_s, notify_rate_hz, tcp, speed_curve
         See the ``osc:`` config section and docs/osc.md.
     tcp_max_connections, tcp_max_per_peer, tcp_idle_timeout_s
-        TCP connection limits (see :class:`~vibsynth.control.osc.transport.TcpSlipTransport`).
+        TCP connection limits (see :class:`~vibsynth.control.osc.transport.TcpTransport`).
     block_size : int, optional
         Reported in status when the engine does not say.
     """
@@ -91,7 +91,7 @@ class OscServer:
             receiver_factory=partial(make_receiver, controller=controller, space=self.handler.space),
         )
         self.tcp = (
-            TcpSlipTransport(
+            TcpTransport(
                 host,
                 port,
                 self.handler.handle_batch,

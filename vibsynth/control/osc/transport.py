@@ -36,8 +36,11 @@ __all__ = [
     "UdpPeer",
     "TcpPeer",
     "UdpTransport",
-    "TcpSlipTransport",
+    "TcpTransport",
     "slip_encode",
+    "length_encode",
+    "LengthPrefixDecoder",
+    "FramingDetector",
     "SlipDecoder",
     "TCP_MAX_CONNECTIONS",
     "TCP_MAX_PER_PEER",
@@ -100,7 +103,7 @@ class UdpPeer:
 
 
 class TcpPeer:
-    """A TCP client connection: replies are SLIP frames on the same connection.
+    """A TCP client connection: replies go back on the same connection, framed as the client frames.
 
     ``keep_alive`` (set for /notify subscribers) exempts it from the idle timeout.
     """
@@ -112,6 +115,7 @@ class TcpPeer:
         self.address = address
         self.closed = False
         self.keep_alive = False
+        self.encode: Callable[[bytes], bytes] = slip_encode  # set from the client's framing
         self._stats = stats
         self._lock = threading.Lock()
 
@@ -120,10 +124,10 @@ class TcpPeer:
         return ("tcp", self.address)
 
     def send(self, data: bytes) -> bool:
-        """Queue a SLIP frame on the (non-blocking) connection; a client that stopped reading is dropped."""
+        """Queue a frame on the (non-blocking) connection; a client that stopped reading is dropped."""
         if self.closed:
             return False
-        frame = slip_encode(data)
+        frame = self.encode(data)
         try:
             with self._lock:
                 self.sock.sendall(frame)
@@ -183,6 +187,98 @@ class SlipDecoder:
                 continue
             self._buf.append(byte)
         return frames
+
+
+def length_encode(data: bytes) -> bytes:
+    """Frame a packet with a 32-bit big-endian length prefix (OSC 1.0 over TCP; liblo's default)."""
+    return len(data).to_bytes(4, "big") + data
+
+
+class LengthPrefixDecoder:
+    """Incremental decoder of length-prefixed frames; frames longer than ``max_frame`` are skipped (counted).
+
+    The bytes of an oversized frame are counted off as they arrive, never stored, so a client
+    announcing 4 GB costs no memory.
+    """
+
+    def __init__(self, max_frame: int = MAX_DATAGRAM) -> None:
+        self.max_frame = max_frame
+        self._buf = bytearray()
+        self._skip = 0
+        self.oversized = 0
+
+    @property
+    def pending(self) -> bool:
+        """True while part of a frame (or of its length) has been received."""
+        return bool(self._buf) or self._skip > 0
+
+    def feed(self, chunk: bytes) -> list[bytes]:
+        """Add received bytes; return the complete frames (possibly none)."""
+        frames = []
+        view = memoryview(chunk)
+        while view:
+            if self._skip:
+                n = min(self._skip, len(view))
+                self._skip -= n
+                view = view[n:]
+                continue
+            self._buf += view
+            view = view[len(view) :]
+            while len(self._buf) >= 4:
+                size = int.from_bytes(self._buf[:4], "big")
+                if size > self.max_frame:
+                    self.oversized += 1
+                    rest = len(self._buf) - 4
+                    self._skip = max(0, size - rest)
+                    del self._buf[: 4 + min(size, rest)]
+                    if self._skip:
+                        break
+                    continue
+                if len(self._buf) < 4 + size:
+                    break
+                if size:
+                    frames.append(bytes(self._buf[4 : 4 + size]))
+                del self._buf[: 4 + size]
+        return frames
+
+
+class FramingDetector:
+    """Decoder of a TCP connection whose framing is told by its first byte.
+
+    OSC 1.1 clients frame with SLIP (the first byte is END, 0xC0, or a packet's first byte,
+    ``/`` or ``#``); OSC 1.0 clients such as liblo's ``oscsend osc.tcp://...`` prefix each
+    packet with its length (a big-endian count, whose first byte is 0 for any frame under
+    16 MiB). Once detected the framing holds for the connection, and replies use it too.
+    """
+
+    def __init__(self, max_frame: int = MAX_DATAGRAM) -> None:
+        self.max_frame = max_frame
+        self.framing: str | None = None
+        self._decoder: SlipDecoder | LengthPrefixDecoder | None = None
+
+    @property
+    def encode(self) -> Callable[[bytes], bytes]:
+        """How replies are framed on this connection (SLIP until the client's framing is known)."""
+        return length_encode if self.framing == "length" else slip_encode
+
+    @property
+    def pending(self) -> bool:
+        return self._decoder is not None and self._decoder.pending
+
+    @property
+    def oversized(self) -> int:
+        return 0 if self._decoder is None else self._decoder.oversized
+
+    def feed(self, chunk: bytes) -> list[bytes]:
+        """Add received bytes; return the complete frames (possibly none)."""
+        if self._decoder is None:
+            if not chunk:
+                return []
+            if chunk[0] in (_END, ord("/"), ord("#")):
+                self.framing, self._decoder = "slip", SlipDecoder(self.max_frame)
+            else:
+                self.framing, self._decoder = "length", LengthPrefixDecoder(self.max_frame)
+        return self._decoder.feed(chunk)
 
 
 # ---------------------------------------------------------------------- UDP
@@ -318,17 +414,17 @@ class UdpTransport:
 
 # ---------------------------------------------------------------------- TCP
 class _Connection:
-    """One TCP connection: its peer, SLIP decoder and the time of its last complete packet."""
+    """One TCP connection: its peer, its framing decoder and the time of its last complete packet."""
 
     __slots__ = ("peer", "decoder", "last_packet")
 
-    def __init__(self, peer: TcpPeer, decoder: SlipDecoder, now: float) -> None:
+    def __init__(self, peer: TcpPeer, decoder: FramingDetector, now: float) -> None:
         self.peer = peer
         self.decoder = decoder
         self.last_packet = now
 
 
-class TcpSlipTransport:
+class TcpTransport:
     """TCP listener with SLIP-framed OSC packets; one selector thread serves every connection.
 
     Stalled clients cannot lock others out: a new connection is refused (closed at
@@ -472,7 +568,7 @@ class TcpSlipTransport:
             return
         conn.setblocking(False)
         self.stats.tcp_connections += 1
-        self._peers[conn] = _Connection(TcpPeer(conn, address[:2], self.stats), SlipDecoder(), self.clock())
+        self._peers[conn] = _Connection(TcpPeer(conn, address[:2], self.stats), FramingDetector(), self.clock())
         self._selector.register(conn, selectors.EVENT_READ)
 
     def _expire_idle(self) -> None:
@@ -506,6 +602,7 @@ class TcpSlipTransport:
         peer, decoder = entry.peer, entry.decoder
         before = decoder.oversized
         frames = decoder.feed(chunk)
+        peer.encode = decoder.encode
         self.stats.oversized_frames += decoder.oversized - before
         for frame in frames:
             self.stats.packets += 1
