@@ -1,0 +1,107 @@
+"""TCP framing: SLIP (OSC 1.1) and length prefixes (OSC 1.0, liblo), told apart per connection."""
+
+from __future__ import annotations
+
+import socket
+
+import numpy as np
+import pytest
+
+from tests.control.osc.fakes import make_controller
+from vibsynth.control.osc.codec import decode_packet, encode_message
+from vibsynth.control.osc.server import OscServer
+from vibsynth.control.osc.transport import (
+    FramingDetector,
+    LengthPrefixDecoder,
+    SlipDecoder,
+    length_encode,
+    slip_encode,
+)
+
+
+def _packets(rng: np.random.Generator, n: int) -> list[bytes]:
+    """Random packets, including every byte value (so SLIP's END/ESC appear inside)."""
+    return [rng.integers(0, 256, int(rng.integers(1, 300)), dtype=np.uint8).tobytes() for _ in range(n)]
+
+
+def _chunks(rng: np.random.Generator, data: bytes) -> list[bytes]:
+    cuts = np.sort(rng.choice(np.arange(1, len(data)), size=min(40, len(data) - 1), replace=False))
+    return [data[a:b] for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), len(data)])]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_length_prefixed_stream_cut_anywhere_gives_back_every_packet(seed):
+    rng = np.random.default_rng(seed)
+    packets = _packets(rng, 30)
+    decoder = LengthPrefixDecoder()
+    out = [frame for chunk in _chunks(rng, b"".join(map(length_encode, packets))) for frame in decoder.feed(chunk)]
+    assert out == packets and not decoder.pending and decoder.oversized == 0
+
+
+def test_an_oversized_length_is_skipped_without_storing_it():
+    decoder = LengthPrefixDecoder(max_frame=100)
+    after = encode_message("/vibsynth/ping", (1,))
+    frames = decoder.feed((1000).to_bytes(4, "big") + b"x" * 400)
+    assert frames == [] and decoder.oversized == 1 and decoder.pending
+    assert len(decoder._buf) < 8  # the 400 bytes were counted off, not kept
+    frames = decoder.feed(b"x" * 600 + length_encode(after))
+    assert frames == [after] and not decoder.pending
+
+
+def test_a_4_gb_announcement_costs_no_memory():
+    decoder = LengthPrefixDecoder()
+    decoder.feed(b"\xff\xff\xff\xff" + b"y" * 65536)
+    assert decoder.oversized == 1 and len(decoder._buf) == 0 and decoder._skip == 0xFFFFFFFF - 65536
+
+
+@pytest.mark.parametrize(
+    "first, framing",
+    [(b"\xc0", "slip"), (b"/", "slip"), (b"#", "slip"), (b"\x00", "length"), (b"\x7f", "length")],
+)
+def test_the_first_byte_tells_the_framing(first, framing):
+    detector = FramingDetector()
+    assert detector.framing is None and detector.encode is slip_encode
+    detector.feed(first)
+    assert detector.framing == framing
+    assert detector.encode is (slip_encode if framing == "slip" else length_encode)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_detector_decodes_both_framings_of_real_messages(seed):
+    rng = np.random.default_rng(seed)
+    messages = [encode_message("/vibsynth/ch/1/intensity", (float(v),)) for v in rng.random(20)]
+    for encode, decoder_type in ((slip_encode, SlipDecoder), (length_encode, LengthPrefixDecoder)):
+        detector = FramingDetector()
+        stream = b"".join(map(encode, messages))
+        out = [frame for chunk in _chunks(rng, stream) for frame in detector.feed(chunk)]
+        assert out == messages and isinstance(detector._decoder, decoder_type)
+
+
+def _request(conn: socket.socket, packet: bytes, decoder) -> bytes:
+    conn.sendall(packet)
+    conn.settimeout(5.0)
+    while True:
+        chunk = conn.recv(65536)
+        assert chunk, "the server closed the connection"
+        frames = decoder.feed(chunk)
+        if frames:
+            return frames[0]
+
+
+@pytest.mark.parametrize("framing", ["slip", "length"])
+def test_server_answers_each_connection_in_its_own_framing(framing):
+    ctl = make_controller(1)
+    server = OscServer(ctl, port=0, tcp=True)
+    server.start()
+    encode, decoder = (slip_encode, SlipDecoder()) if framing == "slip" else (length_encode, LengthPrefixDecoder())
+    try:
+        with socket.create_connection(("127.0.0.1", server.port), timeout=5.0) as conn:
+            conn.sendall(encode(encode_message("/vibsynth/intensity", (0.25,))))
+            reply = _request(conn, encode(encode_message("/vibsynth/ping", (7,))), decoder)
+            assert decode_packet(reply).address == "/vibsynth/pong"
+            assert ctl.get("intensity", 0) == 0.25
+            reply = _request(conn, encode(encode_message("/vibsynth/ch/2/intensity", (0.5,))), decoder)
+            msg = decode_packet(reply)
+            assert msg.address == "/vibsynth/error" and "channel 2 out of range" in msg.args[1]
+    finally:
+        server.stop()
