@@ -44,8 +44,35 @@ def test_compare_needs_two_files_and_valid_weights(recordings, capsys):
     _, paths, _ = recordings
     assert main(["compare", str(paths[0])]) == 2
     assert "at least two" in capsys.readouterr().err
-    assert main(["compare", str(paths[0]), str(paths[1]), "--weights", "1,-1"]) == 2
+    assert main(["compare", str(paths[0]), str(paths[1]), "--weights", "1,-1,0,0,0,0,0,0"]) == 2
     assert "non-negative" in capsys.readouterr().err
+    assert main(["compare", str(paths[0]), str(paths[1]), "--weights", "1,2"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "2 value(s) given; give 8, one per score component" in err
+
+
+def test_compare_shows_whole_names_and_every_format(tmp_path, recordings, capsys):
+    folder, paths, t1 = recordings
+    # names that differ only at their very end (a 12-character label made every row look the same)
+    deep = tmp_path / "a-long-folder-name-for-the-session-of-2026-11-24" / "scans"
+    deep.mkdir(parents=True)
+    long_names = []
+    for k in range(3):
+        target = deep / f"brushed-aluminium-mesh-scan-at-40mm-per-second-trial-{k}.wav"
+        target.write_bytes(paths[k].read_bytes())
+        long_names.append(str(target))
+    assert main(["compare", "--recursive", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert all(name in text for name in long_names)  # whole, never cut (stdout is not a terminal)
+    assert main(["compare", "-r", str(tmp_path), "--format", "csv"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "file_a,file_b,D" and len(lines) == 4
+    a, b, d = lines[1].split(",")
+    assert (a, b) == (long_names[0], long_names[1]) and float(d) == pytest.approx(abs(t1[0] - t1[1]), abs=0.3)
+    assert main(["compare", "-r", str(tmp_path), "--format", "json"]) == 0
+    assert json.loads(capsys.readouterr().out)["files"] == long_names
+    assert main(["compare", str(tmp_path)]) == 2
+    assert "is a folder (add --recursive" in capsys.readouterr().err
 
 
 def test_dissim_fit(recordings, capsys):

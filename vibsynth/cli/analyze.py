@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 from vibsynth.cli._common import add_basis_argument, basis_from_args, sample_rate
+from vibsynth.cli._inputs import add_recursive_argument, expand_recordings, wav_channel
+from vibsynth.cli._table import Column, add_format_argument, emit, output_format
 from vibsynth.dsp.analysis import Analysis, analyze
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB
 from vibsynth.errors import InputError, ParameterError
@@ -21,7 +22,8 @@ Measure each recording's two perceptual attributes:
   balance  high/low balance in knob units (0 = mean spectrum M, +-1 = 98th/2nd percentile of the
            basis' database, + = brighter); '*' marks a recording outside the database's range
   t1       raw first PCA score;  nonstat  std of the level over 100 ms windows (dB)
---json adds the 8 scores T1..T8 and the 30-band dB spectrum.
+--format json (or --json) adds the 8 scores T1..T8 and the 30-band dB spectrum; --format csv
+gives the table's columns as numbers. Folders are walked with --recursive.
 """
 
 
@@ -32,10 +34,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("files", nargs="+", metavar="FILE", help="WAV, or CSV/TXT with one column of samples")
+    p.add_argument("files", nargs="+", metavar="FILE", help="WAV, or CSV/TXT with one column of samples; or a folder")
+    add_recursive_argument(p)
     p.add_argument("--rate", type=sample_rate, metavar="HZ", help="sample rate of CSV/TXT files")
-    p.add_argument("--channel", type=int, default=0, metavar="N", help="channel of a multi-channel WAV (0-based)")
-    p.add_argument("--json", action="store_true", help="print JSON (one object per file, in a list)")
+    p.add_argument(
+        "--channel", type=wav_channel, default=0, metavar="N", help="channel of a multi-channel WAV (1 = the first)"
+    )
+    add_format_argument(p)
     p.add_argument("--ceiling-db", type=float, default=DEFAULT_CEILING_DB, help="intensity knob ceiling (dB)")
     p.add_argument("--range-db", type=float, default=DEFAULT_RANGE_DB, help="intensity knob range (dB)")
     add_basis_argument(p)
@@ -50,27 +55,44 @@ def analyze_file(path: str, args: argparse.Namespace, basis) -> Analysis:
         raise InputError(f"{path}: {exc}") from None
 
 
-def _row(name: str, a: Analysis) -> str:
-    flag = "*" if a.outside_database else " "
-    level = f"{a.level_db:8.2f}" if math.isfinite(a.level_db) else "    -inf"
-    shown = name if len(name) <= 32 else "…" + name[-31:]
-    return (
-        f"{shown:<32} {a.duration_s:7.2f} {a.fs:8.0f} {level} {a.intensity_knob:6.3f} "
-        f"{a.balance:+8.3f}{flag} {a.t1:+8.2f} {a.non_stationarity_db:7.2f}"
-    )
+def _level(value: float) -> str:
+    return f"{value:.2f}" if math.isfinite(value) else "-inf"
+
+
+COLUMNS = (
+    Column("file", "file", name=True),
+    Column("duration_s", "dur s", lambda v: f"{v:.2f}"),
+    Column("fs", "rate Hz", lambda v: f"{v:.0f}"),
+    Column("level_db", "level dB", _level),
+    Column("intensity_knob", "knob", lambda v: f"{v:.3f}"),
+    Column("balance", "balance", lambda v: f"{v:+.3f}"),
+    Column("outside", "", lambda v: "*" if v else ""),
+    Column("t1", "t1", lambda v: f"{v:+.2f}"),
+    Column("non_stationarity_db", "nonstat", lambda v: f"{v:.2f}"),
+)
+
+
+def _row(path: str, a: Analysis) -> dict[str, object]:
+    return {
+        "file": path,
+        "duration_s": a.duration_s,
+        "fs": a.fs,
+        "level_db": a.level_db,
+        "intensity_knob": a.intensity_knob,
+        "balance": a.balance,
+        "outside": a.outside_database,
+        "t1": a.t1,
+        "non_stationarity_db": a.non_stationarity_db,
+    }
 
 
 def run(args: argparse.Namespace) -> int:
+    fmt = output_format(args)
+    files = [str(p) for p in expand_recordings(args.files, recursive=args.recursive)]
     basis = basis_from_args(args)
-    results = [(path, analyze_file(path, args, basis)) for path in args.files]
-    if args.json:
-        print(json.dumps([{"file": p, "basis_id": basis.id, **a.to_dict()} for p, a in results], indent=2))
-        return 0
-    print(
-        f"{'file':<32} {'dur s':>7} {'rate Hz':>8} {'level dB':>8} {'knob':>6} {'balance':>9} {'t1':>8} {'nonstat':>7}"
-    )
-    for path, a in results:
-        print(_row(path, a))
-    if any(a.outside_database for _, a in results):
+    results = [(path, analyze_file(path, args, basis)) for path in files]
+    rows = [_row(p, a) for p, a in results]
+    emit(rows, COLUMNS, fmt, json_rows=[{"file": p, "basis_id": basis.id, **a.to_dict()} for p, a in results])
+    if fmt == "table" and any(a.outside_database for _, a in results):
         print(f"* outside the t1 range of the basis' database ({basis.t1_min:.1f} .. {basis.t1_max:.1f})")
     return 0

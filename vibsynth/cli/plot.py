@@ -88,6 +88,7 @@ def run_presets(args: argparse.Namespace) -> int:
 
 
 def run_mds(args: argparse.Namespace) -> int:
+    from vibsynth.cli.compare import one_per_component
     from vibsynth.dsp.dissimilarity import PAPER_WEIGHTS, check_weights
     from vibsynth.research.dissim import mds_map, read_ratings, scores_for_files
     from vibsynth.research.plots import plot_mds
@@ -96,7 +97,8 @@ def run_mds(args: argparse.Namespace) -> int:
     weights = PAPER_WEIGHTS
     if args.weights:
         try:
-            weights = check_weights([float(v) for v in args.weights.split(",")], basis.n_components)
+            typed = [float(v) for v in args.weights.split(",")]
+            weights = check_weights(one_per_component(typed, basis.n_components), basis.n_components)
         except ValueError:
             raise ParameterError(f"--weights {args.weights!r}: expected comma-separated numbers") from None
     table = read_ratings(args.ratings)
