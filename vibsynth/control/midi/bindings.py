@@ -52,6 +52,10 @@ class Binding:
         full live range (intensity 0..1, balance the controller's limits).
     invert : bool
         Swap the ends (controller maximum -> low end).
+    shorthand : bool
+        Made from the ``midi.nrpn`` shorthand key rather than a ``midi.mapping`` entry:
+        MIDI learn does not write it into ``midi.mapping`` (the shorthand key keeps it).
+        Not part of equality.
     """
 
     knob: str
@@ -61,6 +65,7 @@ class Binding:
     low: float | None = None
     high: float | None = None
     invert: bool = False
+    shorthand: bool = field(default=False, compare=False)
 
     def to_config(self) -> dict[str, Any]:
         """The binding as a ``midi.mapping`` list entry (1-based channel)."""
@@ -149,7 +154,7 @@ def parse_bindings(mapping: Mapping[str, Any] | None, nrpn: Mapping[str, Any] | 
         if knob not in KNOBS:
             raise ConfigError(f"midi.nrpn.{knob}: unknown knob; knobs are {', '.join(KNOBS)}")
         if number is not None:
-            out.append(Binding(knob, nrpn=_nrpn_number(number, f"midi.nrpn.{knob}")))
+            out.append(Binding(knob, nrpn=_nrpn_number(number, f"midi.nrpn.{knob}"), shorthand=True))
     return tuple(out)
 
 

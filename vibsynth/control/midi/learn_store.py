@@ -3,25 +3,38 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import Any
 
-from vibsynth.control.midi.bindings import KNOBS, Binding
+from vibsynth.control.midi.bindings import DEFAULT_NRPN, KNOBS, Binding
+from vibsynth.settings.config import CONFIG_ENV_VAR, user_config_file
 
 
-def user_config_path(explicit: str | os.PathLike[str] | None = None) -> Path:
-    """The config file MIDI learn writes to.
+def user_config_path(explicit: str | os.PathLike[str] | None = None, env: Mapping[str, str] | None = None) -> Path:
+    """The config file MIDI learn writes to: the file the config layer reads as the user's.
 
-    ``--config`` if given, else the platform config folder's ``config.yaml``.
+    The rule of :func:`vibsynth.settings.config.load_config`: ``--config`` if given, else
+    ``$VIBSYNTH_CONFIG`` if set and not empty, else the platform file
+    (:func:`vibsynth.settings.config.user_config_file`), which is created when missing.
+
+    Parameters
+    ----------
+    explicit : path-like, optional
+        The ``--config`` argument.
+    env : mapping, optional
+        Environment (default ``os.environ``).
+
+    Returns
+    -------
+    path : Path
     """
+    env = os.environ if env is None else env
     if explicit:
-        return Path(explicit)
-    try:
-        import platformdirs
-
-        return Path(platformdirs.user_config_dir("vibsynth")) / "config.yaml"
-    except ImportError:  # pragma: no cover - platformdirs is a dependency
-        return Path.home() / ".config" / "vibsynth" / "config.yaml"
+        return Path(explicit).expanduser()
+    if env.get(CONFIG_ENV_VAR):
+        return Path(env[CONFIG_ENV_VAR]).expanduser()
+    return user_config_file()
 
 
 def save_learned_mapping(
@@ -34,7 +47,9 @@ def save_learned_mapping(
     when missing; the write goes through :func:`vibsynth.formats.files.atomic_write` (a crash leaves
     the old file or the new one; the file keeps its mode). Bindings that come from
     ``midi.nrpn`` shorthand keys are written as ``{nrpn: [msb, lsb]}`` entries only if
-    they were learned.
+    they were learned. A shorthand binding that is no longer in ``bindings`` (a learned
+    binding took its controller) is removed from ``midi.nrpn`` (written with the remaining
+    ones when the file had no such key), so the file reloads into the same bindings.
 
     Parameters
     ----------
@@ -79,12 +94,37 @@ def save_learned_mapping(
     for knob in knobs:
         entries = CommentedSeq()
         for b in bindings:
-            if b.knob == knob and (b.cc is not None or b.nrpn is not None):
+            if b.knob == knob and not b.shorthand and (b.cc is not None or b.nrpn is not None):
                 item = CommentedMap(b.to_config())
                 item.fa.set_flow_style()
                 entries.append(item)
         entries.fa.set_flow_style()
         mapping[knob] = entries
+    _drop_displaced_shorthand(midi, bindings)
     text = _io.StringIO()
     YAML().dump(doc, text)  # round-trip dumper: comments and layout kept
     atomic_write(path, text.getvalue())
+
+
+def _drop_displaced_shorthand(midi: Any, bindings: list[Binding]) -> None:
+    """Remove from ``midi.nrpn`` (round-trip map) the shorthand bindings ``bindings`` no longer has."""
+    from ruamel.yaml.comments import CommentedMap, CommentedSeq
+
+    kept = {b.knob: b.nrpn for b in bindings if b.shorthand and b.nrpn is not None}
+    table = midi.get("nrpn")
+    configured = DEFAULT_NRPN if table is None else table
+    if not isinstance(configured, Mapping):
+        return  # not a mapping: the config layer reports it
+    displaced = [knob for knob, number in configured.items() if number is not None and knob not in kept]
+    if not displaced:
+        return
+    if table is None:  # the defaults apply as a whole: write the ones that remain
+        table = midi["nrpn"] = CommentedMap()
+        for knob, number in kept.items():
+            pair = CommentedSeq([number // 128, number % 128])
+            pair.fa.set_flow_style()
+            table[knob] = pair
+        table.fa.set_flow_style()
+    else:
+        for knob in displaced:
+            del table[knob]
