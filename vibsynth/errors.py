@@ -18,6 +18,8 @@ __all__ = [
     "MissingDependencyError",
     "EngineBusyError",
     "ScheduleFullError",
+    "NoReplyError",
+    "ServerError",
 ]
 
 
@@ -59,3 +61,47 @@ class EngineBusyError(VibsynthError):
 
 class ScheduleFullError(EngineBusyError):
     """Too many timetagged commands are waiting: the cap (``engine.schedule_capacity``) was reached."""
+
+
+class NoReplyError(VibsynthError, TimeoutError):
+    """A running server was expected to answer and did not in time (:class:`vibsynth.Client`, ``vibsynth send``).
+
+    Attributes
+    ----------
+    host : str
+    port : int
+    timeout : float
+        Seconds waited.
+    request : str
+        The OSC address that asked (``""`` when not one request).
+    """
+
+    def __init__(self, host: str, port: int, timeout: float, request: str = "") -> None:
+        self.host, self.port, self.timeout, self.request = host, int(port), float(timeout), request
+        where = f"[{host}]" if ":" in host else host
+        text = f"no reply from {where}:{self.port} within {self.timeout!r} s"
+        if request:
+            text += f" (to {request}; is `vibsynth serve` running there?)"
+        super().__init__(text)
+
+
+class ServerError(VibsynthError):
+    """A server refused a request: it answered ``/vibsynth/error address message`` (nothing changed).
+
+    Attributes
+    ----------
+    address : str
+        The address the server complains about (what was sent).
+    message : str
+        The server's own explanation.
+    errors : tuple of (str, str)
+        Every ``(address, message)`` reported at once (``Client.sync`` may collect several).
+    """
+
+    def __init__(self, address: str, message: str, errors: tuple[tuple[str, str], ...] = ()) -> None:
+        self.address, self.message = address, message
+        self.errors = errors or ((address, message),)
+        text = f"{address}: {message}"
+        if len(self.errors) > 1:
+            text += f" (and {len(self.errors) - 1} more error(s))"
+        super().__init__(text)

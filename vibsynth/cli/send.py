@@ -1,28 +1,30 @@
-"""``vibsynth send``: send one OSC message to a running ``vibsynth serve`` (and print its replies)."""
+"""``vibsynth send``: send one OSC message to a running ``vibsynth serve`` (and print its replies).
+
+Encoding, parsing and the socket are :mod:`vibsynth.app.client`'s (python-osc), the same as
+:class:`vibsynth.Client`. After the message, ``send`` asks ``/ping`` with a random token on
+the same socket: the server handles packets in order, so its ``/pong`` tells that the
+message was handled and that every error reply about it has already arrived.
+"""
 
 from __future__ import annotations
 
 import argparse
 import math
+import random
 import re
-import select
-import socket
 import sys
 import time
 from collections.abc import Sequence
 
-from vibsynth.control.osc.codec import (
-    IMMEDIATE,
-    Bundle,
-    MalformedPacket,
-    Message,
-    decode_packet,
+from vibsynth.app.client import (
+    IMMEDIATELY,
+    Client,
+    Reply,
     encode_bundle,
     encode_message,
-    iter_messages,
-    unix_to_ntp,
+    format_reply,
 )
-from vibsynth.errors import ParameterError
+from vibsynth.errors import NoReplyError, ParameterError
 
 ORDER = 6
 
@@ -34,12 +36,16 @@ Send one OSC message over UDP, e.g.
   vibsynth send /vibsynth/preset 3 --types s        (force types: the name "3" as a string)
   vibsynth send /vibsynth/intensity 0.8 --delay 2   (bundle timetagged 2 s ahead)
 Argument types are inferred: integer -> i, other number -> f, anything else -> s.
-With --wait-reply, replies are printed as 'ADDRESS TYPES ARGS...' (oscdump style); the exit code is 1
-when an error reply (/.../error) arrived. See docs/osc.md for the address space.
+The exit code is 1 when the server refuses the message (its error is printed). With
+--wait-reply, replies are printed as 'ADDRESS TYPES ARGS...' (oscdump style), and the exit
+code is also 1 when no server answers within SECONDS. See docs/osc.md for the address space.
 """
 
 _INT = re.compile(r"[+-]?\d+\Z")
 _QUIET_S = 0.05
+#: Without --wait-reply, how long to wait for the server to confirm (it answers in about a millisecond).
+CONFIRM_S = 0.5
+_CHANNEL = re.compile(r"/ch/[^/]*\Z")
 
 
 def infer(text: str) -> tuple[object, str]:
@@ -85,20 +91,12 @@ def convert(values: Sequence[str], types: str | None) -> tuple[list[object], str
     return out, types
 
 
-def format_message(msg: Message) -> str:
+def format_message(msg: Reply) -> str:
     """``/address types arg...`` (strings quoted only when they contain spaces)."""
-    parts = [msg.address, msg.types or "-"]
-    for arg in msg.args:
-        if isinstance(arg, float):
-            parts.append(repr(arg) if math.isfinite(arg) else str(arg))
-        elif isinstance(arg, str):
-            parts.append(repr(arg) if (" " in arg or not arg) else arg)
-        else:
-            parts.append(str(arg))
-    return " ".join(parts)
+    return format_reply(msg)
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = subparsers.add_parser(
         "send",
         help="send an OSC message to a running server (for tests and scripts)",
@@ -148,54 +146,78 @@ def _defaults(args: argparse.Namespace) -> tuple[str, int]:
     return host, port
 
 
-def receive_replies(sock: socket.socket, wait_s: float) -> list[Message]:
-    """Replies arriving within ``wait_s`` (stops 50 ms after the last one)."""
-    replies: list[Message] = []
-    deadline = time.monotonic() + wait_s
+def prefix_of(address: str) -> str:
+    """The server prefix an address was sent under: ``/vibsynth/ch/2/intensity`` -> ``/vibsynth``."""
+    head = address.rstrip("/").rsplit("/", 1)[0]
+    return _CHANNEL.sub("", head)
+
+
+def exchange(client: Client, data: bytes, wait_s: float) -> tuple[list[Reply], bool]:
+    """Send ``data`` and a ``/ping`` barrier; return ``(replies, answered)``.
+
+    ``replies`` are the server's answers to ``data`` (the barrier's own are left out);
+    ``answered`` tells whether the server answered at all. With ``wait_s`` = 0 only until
+    the barrier's answer (at most :data:`CONFIRM_S`); otherwise up to ``wait_s`` seconds,
+    stopping 50 ms after the last reply once the barrier was answered.
+    """
+    token = random.randrange(1, 2**31)
+    ping = f"{client.prefix}/ping"
+    client.send_packet(data)
+    client.send_packet(encode_message(ping, (token, "vibsynth send"), "is"))
+    replies: list[Reply] = []
+    answered = False
+    started = time.monotonic()
+    deadline = started + (wait_s if wait_s > 0 else CONFIRM_S)
     while True:
-        remaining = deadline - time.monotonic()
-        if replies:
-            remaining = min(remaining, _QUIET_S)
+        now = time.monotonic()
+        remaining = deadline - now
+        if answered and (wait_s <= 0 or replies):
+            remaining = min(remaining, _QUIET_S if wait_s > 0 else 0.0)
         if remaining <= 0:
-            return replies
-        ready, _, _ = select.select([sock], [], [], remaining)
-        if not ready:
-            return replies
-        data = sock.recv(65536)
-        try:
-            packet = decode_packet(data)
-        except MalformedPacket as exc:
-            print(f"vibsynth: malformed reply ({exc})", file=sys.stderr)
-            continue
-        if isinstance(packet, Bundle):
-            replies.extend(m for m, _ in iter_messages(packet))
-        else:
-            replies.append(packet)
+            return replies, answered
+        for reply in client.receive(remaining):
+            if reply.address == f"{client.prefix}/pong" and reply.args == (token, "vibsynth send"):
+                answered = True
+            elif _is_error(reply) and reply.args[0] == ping:
+                answered = True  # a server under another prefix: it answered, about our ping
+            else:
+                replies.append(reply)
+                answered = True
+
+
+def _is_error(reply: Reply) -> bool:
+    """An error reply (``PREFIX/error s address s message``; the server's prefix may differ from the address')."""
+    return reply.address.endswith("/error") and len(reply.args) == 2 and all(isinstance(a, str) for a in reply.args)
 
 
 def run(args: argparse.Namespace) -> int:
     if not args.address.startswith("/"):
         raise ParameterError(f"OSC addresses start with '/', got {args.address!r}")
+    wait = args.wait_reply
+    if not math.isfinite(wait) or wait < 0:
+        raise ParameterError(f"--wait-reply must be a finite number of seconds >= 0, got {wait:g}")
+    if not 0 <= args.from_port <= 65535:
+        raise ParameterError(f"--from-port {args.from_port} is outside [0, 65535] (0 = any)")
     values, types = convert(args.args, args.types)
     data = encode_message(args.address, values, types)
     if args.delay is not None:
         if not math.isfinite(args.delay):
             raise ParameterError("--delay must be finite")
-        timetag = IMMEDIATE if args.delay == 0 else unix_to_ntp(time.time() + args.delay)
-        data = encode_bundle(timetag, [data])
+        data = encode_bundle(IMMEDIATELY if args.delay == 0 else time.time() + args.delay, [data])
     host, port = _defaults(args)
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_DGRAM) as sock:
-        sock.bind(("::" if family == socket.AF_INET6 else "0.0.0.0", args.from_port))
+    with Client(host, port, prefix=prefix_of(args.address), local_port=args.from_port) as client:
         try:
-            sock.sendto(data, (host, port))
+            replies, answered = exchange(client, data, wait)
         except OSError as exc:
             raise ParameterError(f"cannot send to {host}:{port}: {exc.strerror or exc}") from None
-        if args.wait_reply <= 0:
-            return 0
-        replies = receive_replies(sock, args.wait_reply)
-    for msg in replies:
-        print(format_message(msg))
-    if not replies:
-        print(f"vibsynth: no reply within {args.wait_reply:g} s", file=sys.stderr)
-    return 1 if any(m.address.endswith("/error") for m in replies) else 0
+    errors = [r for r in replies if _is_error(r)]
+    if wait > 0:
+        for msg in replies:
+            print(format_message(msg))
+        if not answered:
+            print(f"vibsynth: error: {NoReplyError(host, port, wait)}", file=sys.stderr)
+            return 1
+        return 1 if errors else 0
+    for error in errors:
+        print(f"vibsynth: error: {error.args[0]}: {error.args[1]}", file=sys.stderr)
+    return 1 if errors else 0
