@@ -1,16 +1,24 @@
-"""Rendering a MIDI file offline through the engine."""
+"""Rendering a MIDI file offline through the live MIDI mapping and the engine (:mod:`vibsynth.app.render`)."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import mido
+import numpy as np
+from numpy.typing import NDArray
 
+from vibsynth.app.render import DEFAULT_BLOCK, ArrayCollector, Cue, RenderResult, Sink, render
 from vibsynth.control.midi.bindings import MidiSettings
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import _one_line
-from vibsynth.errors import ParameterError
+from vibsynth.engine.engine import Engine
+from vibsynth.errors import InputError, ParameterError
+
+__all__ = ["MidiRender", "prepare_midi_render", "render_midi_file", "render_midi_to"]
 
 
 def _knob_limits(data: dict[str, Any]) -> Any:
@@ -22,53 +30,69 @@ def _knob_limits(data: dict[str, Any]) -> Any:
     )
 
 
-def render_midi_file(
+@dataclass
+class MidiRender:
+    """A MIDI file ready to render: the engine, its timeline and the length.
+
+    Attributes
+    ----------
+    engine : Engine
+        With the controller and mapper that the timeline's cues call.
+    timeline : list of Cue
+        One cue per (non-meta) message at its frame; each calls ``mapper.handle(msg, at_frame=...)``.
+    frames : int
+        Output length.
+    """
+
+    engine: Engine
+    timeline: list[Cue]
+    frames: int
+
+    @property
+    def fs(self) -> float:
+        return float(self.engine.fs)
+
+
+def prepare_midi_render(
     path: str | os.PathLike[str],
     *,
-    config: Any,
+    config: Any = None,
     basis: Any = None,
     seconds: float | None = None,
     presets: Any = None,
-    block: int = 1024,
-    engine: Any = None,
-) -> tuple[Any, float]:
-    """Render a MIDI file (CC automation and notes) offline through the live mapping.
-
-    Every message is applied at its exact sample (``at_frame``), so the result
-    is the same as playing the file into ``vibsynth serve`` with no jitter.
+    engine: Engine | None = None,
+) -> MidiRender:
+    """Read a MIDI file and set up the engine, controller and mapper that play it.
 
     Parameters
     ----------
-    path : path
+    path : path-like
         Standard MIDI file (type 0 or 1; tempo changes honoured).
-    config : vibsynth.settings.config.Config
+    config : Config, optional
+        Default: the packaged defaults (``load_config(user_file=False)``).
     basis : Basis, optional
         Passed to :func:`vibsynth.app.service.build_engine`.
     seconds : float, optional
         Output length; default the file's length plus the release time and 0.25 s.
     presets : preset library, optional
         For program changes.
-    block : int
-        Render block size (frames).
     engine : Engine, optional
         A fresh engine to render with (tests, benchmarks); default
         ``vibsynth.app.service.build_engine(config, basis=basis)``.
-
-    Returns
-    -------
-    samples : ndarray, float32, shape (frames, channels)
-    fs : float
 
     Raises
     ------
     InputError
         The file cannot be read as MIDI.
+    ParameterError
+        A non-positive length.
     """
-    import numpy as np
-
     from vibsynth.control.controller import Controller
-    from vibsynth.errors import InputError
 
+    if config is None:
+        from vibsynth.settings.config import load_config
+
+        config = load_config(user_file=False)
     try:
         midi_file = mido.MidiFile(str(path))
     except (OSError, ValueError, EOFError, KeyError, IndexError) as exc:
@@ -88,25 +112,68 @@ def render_midi_file(
     settings = MidiSettings.from_config(data, engine.channels)
     mapper = MidiMapper(controller, settings, presets=presets, source="midi-file")
     fs = float(engine.fs)
-    events: list[tuple[int, mido.Message]] = []
+    timeline: list[Cue] = []
     t = 0.0
     for msg in midi_file:  # iteration yields delta times in seconds (tempo applied)
         t += float(msg.time)
         if not msg.is_meta:
-            events.append((int(round(t * fs)), msg))
+            timeline.append(Cue(int(round(t * fs)), _handler(mapper, msg)))
     if seconds is None:
         seconds = t + settings.release_s + 0.25
-    total = int(round(float(seconds) * fs))
-    if total <= 0:
+    frames = int(round(float(seconds) * fs))
+    if frames <= 0:
         raise ParameterError(f"render length must be positive, got {seconds!r} s")
-    out = np.zeros((total, engine.channels), dtype=np.float32)
-    i = 0
-    pos = 0
-    while pos < total:
-        n = min(block, total - pos)
-        while i < len(events) and events[i][0] < pos + n:
-            mapper.handle(events[i][1], at_frame=max(events[i][0], pos))
-            i += 1
-        out[pos : pos + n] = engine.render(n)
-        pos += n
-    return out, fs
+    return MidiRender(engine, timeline, frames)
+
+
+def _handler(mapper: MidiMapper, msg: mido.Message) -> Callable[[int], object]:
+    return lambda at_frame: mapper.handle(msg, at_frame=at_frame)
+
+
+def render_midi_to(
+    job: MidiRender,
+    sink: Sink,
+    *,
+    block: int = DEFAULT_BLOCK,
+    progress: Callable[[int, int], None] | None = None,
+) -> RenderResult:
+    """Render a prepared MIDI file into ``sink`` (a streaming WAV writer, a collector).
+
+    Every message is applied at its exact sample (``at_frame``), so the result is the
+    same as playing the file into ``vibsynth serve`` with no jitter.
+    """
+    return render(job.engine, job.frames, sink, timeline=job.timeline, block=block, progress=progress)
+
+
+def render_midi_file(
+    path: str | os.PathLike[str],
+    *,
+    config: Any = None,
+    basis: Any = None,
+    seconds: float | None = None,
+    presets: Any = None,
+    block: int = DEFAULT_BLOCK,
+    engine: Engine | None = None,
+) -> tuple[NDArray[np.float32], float]:
+    """Render a MIDI file (CC automation and notes) offline into an array.
+
+    For short renders; stream long ones to a file with :func:`prepare_midi_render`,
+    :func:`render_midi_to` and a :class:`~vibsynth.formats.wav_stream.WavStreamWriter`.
+    Parameters as :func:`prepare_midi_render`; ``block`` is the render block (frames).
+
+    Returns
+    -------
+    samples : ndarray, float32, shape (frames, channels)
+    fs : float
+
+    Raises
+    ------
+    InputError
+        The file cannot be read as MIDI.
+    ParameterError
+        A non-positive length, or one too long to hold in memory
+        (:data:`~vibsynth.app.render.MAX_COLLECT_BYTES`).
+    """
+    job = prepare_midi_render(path, config=config, basis=basis, seconds=seconds, presets=presets, engine=engine)
+    result = render_midi_to(job, ArrayCollector(job.frames, job.engine.channels), block=block)
+    return result.output, job.fs

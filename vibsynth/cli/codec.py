@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -204,18 +205,34 @@ def run_encode(args: argparse.Namespace) -> int:
 
 
 def run_decode(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from vibsynth.app import vbt_render
+    from vibsynth.app.render import ArrayCollector, GainSink, TeeSink
     from vibsynth.dsp.codec import quality
     from vibsynth.formats import vbt
-    from vibsynth.formats.recordings import read_recording, write_wav
+    from vibsynth.formats.recordings import read_recording
+    from vibsynth.formats.wav_stream import WavStreamWriter, check_target
 
     started = time.perf_counter()
+    try:
+        check_target(args.output)
+    except OSError as exc:
+        return _output_error(exc)
     decoded = vbt.read_vbt(args.input)
     traj = decoded.trajectory
     basis = _basis_for(args, traj.basis_id)
-    rendered = vbt_render.render(traj, basis=basis, rate=args.rate, config_path=args.config)
-    signal = rendered.signal * (10.0 ** (rendered.offset_db / 20.0) if args.absolute else 1.0)
-    write_wav(args.output, signal, rendered.fs)
+    ref = read_recording(args.reference, fs=args.reference_rate) if args.reference is not None else None
+    rendered = vbt_render.prepare(traj, basis=basis, rate=args.rate, config_path=args.config)
+    gain = 10.0 ** (rendered.offset_db / 20.0) if args.absolute else 1.0
+    try:
+        with WavStreamWriter(args.output, rendered.fs, 1, frames=rendered.frames) as wav:
+            sink: Any = wav
+            if ref is not None:  # the quality check needs the whole decoded signal, as the reference is held whole
+                sink = TeeSink(wav, ArrayCollector(rendered.frames, 1, np.float64, max_bytes=8 * rendered.frames))
+            done = vbt_render.render_to(rendered, GainSink(sink, gain) if args.absolute else sink)
+    except OSError as exc:
+        return _output_error(exc)
     decode_s = time.perf_counter() - started
     report: dict[str, Any] = {
         "input": str(args.input),
@@ -228,11 +245,10 @@ def run_decode(args: argparse.Namespace) -> int:
         **ratios(decoded.size_bytes, traj.n_samples, traj.fs),
     }
     q = None
-    if args.reference is not None:
-        ref = read_recording(args.reference, fs=args.reference_rate)
+    if ref is not None:
         q = quality(
             ref.samples,
-            signal,
+            done.output[1][:, 0],
             fs=ref.fs,
             decoded_fs=rendered.fs,
             basis=basis,
@@ -244,10 +260,7 @@ def run_decode(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report, indent=2, default=float))
         return 0
-    print(
-        f"{args.input} -> {args.output}: {len(signal) / rendered.fs:.2f} s at {rendered.fs:g} Hz, "
-        f"{rendered.n_events} knob moves"
-    )
+    print(f"{args.input} -> {args.output}: {done.seconds:.2f} s at {rendered.fs:g} Hz, {rendered.n_events} knob moves")
     if rendered.offset_db > 0 and not args.absolute:
         print(
             f"level: rendered {rendered.offset_db:.1f} dB below the encoded absolute level "
@@ -261,3 +274,9 @@ def run_decode(args: argparse.Namespace) -> int:
     else:
         print("quality: give --reference ORIGINAL to compare with the original recording")
     return 0
+
+
+def _output_error(exc: OSError) -> int:
+    """One line for an output file that cannot be written (missing folder, a folder, permission); exit 1."""
+    print(f"vibsynth: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+    return 1

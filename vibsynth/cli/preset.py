@@ -232,16 +232,8 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
     return 0
 
 
-def render_preset(config: Config, library: PresetLibrary, name: str, seconds: float) -> tuple[Any, float]:
-    """Render a preset through the engine (``vibsynth.app.service.build_engine``) for ``seconds``.
-
-    Returns
-    -------
-    samples : ndarray, shape (frames, channels)
-    fs : float
-    """
-    import numpy as np
-
+def _preset_engine(config: Config, library: PresetLibrary, name: str) -> Any:
+    """An engine (``vibsynth.app.service.build_engine``) with the preset loaded at frame 0."""
     from vibsynth.control.controller import Controller, KnobLimits
 
     try:
@@ -258,16 +250,7 @@ def render_preset(config: Config, library: PresetLibrary, name: str, seconds: fl
         initial_glide_s=knobs["glide_ms"] / 1000.0,
     )
     controller.load_preset(preset.name, source="cli")
-    fs = float(engine.fs)
-    total = int(round(seconds * fs))
-    block = int(config.get("audio.block_size"))
-    out = np.empty((total, engine.channels), dtype=np.float32)
-    done = 0
-    while done < total:
-        n = min(block, total - done)
-        out[done : done + n] = engine.render(n)
-        done += n
-    return out, fs
+    return engine
 
 
 def cmd_play(args: argparse.Namespace) -> int:
@@ -278,13 +261,21 @@ def cmd_play(args: argparse.Namespace) -> int:
     library = load_library(config)
     preset = library.get(args.name)
     if args.output is not None:
-        from vibsynth.formats.recordings import write_wav
+        from vibsynth.app.render import render
+        from vibsynth.formats.wav_stream import WavStreamWriter, check_target
 
-        samples, fs = render_preset(config, library, preset.name, args.seconds)
-        write_wav(args.output, samples, fs, sample_format=args.format)
+        try:
+            check_target(args.output)
+            engine = _preset_engine(config, library, preset.name)
+            total = int(round(args.seconds * engine.fs))
+            with WavStreamWriter(args.output, engine.fs, engine.channels, sample_format=args.format, frames=total) as w:
+                result = render(engine, total, w, block=int(config.get("audio.block_size")))
+        except OSError as exc:  # missing folder, a folder, permission: one line, exit 1
+            print(f"vibsynth: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+            return 1
         print(
             f"wrote {args.output}: {preset.name} (intensity {preset.intensity:.3f}, balance {preset.balance:+.3f}),"
-            f" {args.seconds:g} s at {fs:g} Hz, {samples.shape[1]} channel(s)"
+            f" {args.seconds:g} s at {result.fs:g} Hz, {result.channels} channel(s)"
         )
         return 0
     import time

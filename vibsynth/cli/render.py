@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 
+from vibsynth.app.render import LoopSource, RenderResult, Sink, loop_period, render
 from vibsynth.cli._common import (
     add_basis_argument,
     basis_from_args,
@@ -22,9 +23,16 @@ from vibsynth.dsp.analysis import VARIANTS, variant_spectra
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB, knob_to_level_db
 from vibsynth.dsp.synthesis import SpectralShaper
 from vibsynth.errors import InputError, ParameterError
-from vibsynth.formats.recordings import write_wav
+from vibsynth.formats.wav_stream import WavStreamWriter, check_target
 
 ORDER = 20
+
+#: Longest period synthesised in one piece (8 s at 48 kHz): a longer render repeats a
+#: period of 1/2 to 1 times this (a divisor of its length, so it still loops seamlessly),
+#: which bounds the synthesis' memory (~17 MB per second of period at 48 kHz).
+MAX_PERIOD_FRAMES = 384_000
+#: Frames per block when streaming a period to the file.
+LOOP_BLOCK = 65_536
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +43,8 @@ Render noise with the paper's spectrum model to a WAV file (a seamless loop of t
                               S1 = M + t1 V1, S1:8 = all 8 components, S2:8 = all but the first, M = mean
   --midi FILE.mid             a MIDI performance through the live MIDI mapping and the real-time engine
 The band powers of the result match the target within rounding (closed-form synthesis).
+The output is written as it renders: memory stays flat whatever --seconds. A texture longer
+than 8 s (at 48 kHz; 384,000 samples) repeats one seamless period of 4-8 s.
 """
 
 
@@ -70,9 +80,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _render_midi(args: argparse.Namespace) -> tuple[np.ndarray, float]:
+def _render_midi(args: argparse.Namespace) -> RenderResult:
     try:
-        from vibsynth.app.midi_render import render_midi_file
+        from vibsynth.app.midi_render import prepare_midi_render, render_midi_to
     except ImportError as exc:
         raise InputError(f"MIDI rendering is unavailable: {exc}") from None
     from vibsynth.settings.config import load_config
@@ -85,16 +95,15 @@ def _render_midi(args: argparse.Namespace) -> tuple[np.ndarray, float]:
         presets = load_library(config)
     except ImportError:
         presets = None
-    return render_midi_file(
+    job = prepare_midi_render(
         args.midi, config=config, basis=basis_from_args(args), seconds=args.seconds, presets=presets
     )
+    with _writer(args, job.fs, job.engine.channels, job.frames) as wav:
+        return render_midi_to(job, _FullScaleGuard(wav, args.format))
 
 
-def run(args: argparse.Namespace) -> int:
-    if args.midi:
-        samples, fs = _render_midi(args)
-        _write(args, samples, fs)
-        return 0
+def _render_loop(args: argparse.Namespace) -> RenderResult:
+    """A texture or a recording's variant: one period of the closed-form synthesis, repeated."""
     basis = basis_from_args(args)
     seconds = args.seconds or 4.0
     rng = np.random.default_rng(args.seed)
@@ -108,26 +117,62 @@ def run(args: argparse.Namespace) -> int:
     else:
         analysis = analyze_file(args.from_file, args, basis)
         fs = args.rate or analysis.fs
-    shaper = SpectralShaper(
-        fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order
-    )
+    frames = int(round(seconds * fs))
+    period = loop_period(frames, MAX_PERIOD_FRAMES)
+    shaper = SpectralShaper(fs=fs, n_samples=period, centres=basis.centres_hz, order=basis.filter_order)
     if analysis is None:
         level = knob_to_level_db(args.intensity, ceiling_db=args.ceiling_db, range_db=args.range_db)
         weights = shaper.solve_balance(basis, args.balance, level_db=level)
     else:
         weights = shaper.solve_weights(variant_spectra(analysis, basis)[args.variant], level_db=analysis.level_db)
-    signal = shaper.render(shaper.power_envelope(weights), shaper.random_phases(rng))
-    _write(args, signal, fs)
+    source = LoopSource(shaper.render(shaper.power_envelope(weights), shaper.random_phases(rng)), fs)
+    _check_full_scale(source.peak, args.format)
+    with _writer(args, fs, 1, frames) as wav:
+        return render(source, frames, wav, block=LOOP_BLOCK)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        check_target(args.output)
+        result = _render_midi(args) if args.midi else _render_loop(args)
+    except OSError as exc:  # the output file: missing folder, a folder, no permission, disk full
+        where = exc.filename if exc.filename is not None else args.output
+        print(f"vibsynth: error: {where}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    peak = result.peak
+    if peak >= 1.0:  # float32 only: pcm16 refuses before anything is written
+        print(f"vibsynth: warning: {_full_scale_message(peak)}; float32 WAV keeps it unclipped", file=sys.stderr)
+    db = 20 * math.log10(peak) if peak > 0 else -math.inf
+    print(f"wrote {args.output}: {result.seconds:.2f} s at {result.fs:g} Hz, peak {db:.1f} dBFS")
     return 0
 
 
-def _write(args: argparse.Namespace, samples: np.ndarray, fs: float) -> None:
-    peak = float(np.max(np.abs(samples))) if samples.size else 0.0
-    if peak >= 1.0:
-        message = f"peak {peak:.2f} exceeds full scale (lower --intensity or --ceiling-db)"
-        if args.format == "pcm16":
-            raise ParameterError(message + "; pcm16 would clip")
-        print(f"vibsynth: warning: {message}; float32 WAV keeps it unclipped", file=sys.stderr)
-    write_wav(args.output, samples, fs, sample_format=args.format)
-    db = 20 * math.log10(peak) if peak > 0 else -math.inf
-    print(f"wrote {args.output}: {samples.shape[0] / fs:.2f} s at {fs:g} Hz, peak {db:.1f} dBFS")
+def _writer(args: argparse.Namespace, fs: float, channels: int, frames: int) -> WavStreamWriter:
+    return WavStreamWriter(args.output, fs, channels, sample_format=args.format, frames=frames)
+
+
+def _full_scale_message(peak: float) -> str:
+    return f"peak {peak:.2f} exceeds full scale (lower --intensity or --ceiling-db)"
+
+
+def _check_full_scale(peak: float, sample_format: str) -> None:
+    if peak >= 1.0 and sample_format == "pcm16":
+        raise ParameterError(_full_scale_message(peak) + "; pcm16 would clip")
+
+
+class _FullScaleGuard:
+    """Refuse a pcm16 render that reaches full scale (the file is then discarded)."""
+
+    def __init__(self, sink: Sink, sample_format: str) -> None:
+        self.sink, self.sample_format = sink, sample_format
+
+    def write(self, block: np.ndarray) -> None:
+        if self.sample_format == "pcm16" and block.size:
+            _check_full_scale(float(np.max(np.abs(block))), self.sample_format)
+        self.sink.write(block)
+
+    def close(self) -> object:
+        return self.sink.close()
+
+    def abort(self) -> None:
+        self.sink.abort()
