@@ -5,15 +5,20 @@
 * :func:`plot_presets` -- presets on the balance axis, with the spectra at the axis' ends;
 * :func:`plot_mds` -- the 2-D perceptual map of a ratings table (Fig. 7).
 
-Every function writes a PNG (atomically) and returns its path. matplotlib is an
-optional dependency (``pip install 'vibsynth[research]'``).
+Every ``plot_*`` function writes a PNG (atomically) and returns its path; the matching
+``*_figure`` function builds the :class:`matplotlib.figure.Figure` without saving it (to
+show, restyle or inspect). Figures are made with matplotlib's object API, not pyplot, inside
+a local :func:`matplotlib.rc_context`: no global matplotlib state (``rcParams``, backend,
+pyplot's figure list) is changed. matplotlib is an optional dependency
+(``pip install 'vibsynth[research]'``).
 """
 
 from __future__ import annotations
 
+import functools
 import io
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +28,16 @@ from vibsynth.dsp.basis import Basis, normalise_db
 from vibsynth.errors import PresetError, VibsynthError
 from vibsynth.research.dissim import MissingDependencyError
 
-__all__ = ["plot_basis", "plot_spectrum", "plot_presets", "plot_mds"]
+__all__ = [
+    "plot_basis",
+    "plot_spectrum",
+    "plot_presets",
+    "plot_mds",
+    "basis_figure",
+    "spectrum_figure",
+    "presets_figure",
+    "mds_figure",
+]
 
 _DPI = 120
 _RC = {
@@ -38,25 +52,38 @@ _RC = {
 }
 
 
-def _pyplot() -> Any:
+def _matplotlib() -> Any:
+    """The matplotlib module, or :class:`MissingDependencyError` saying how to install it."""
     try:
         import matplotlib
-
-        matplotlib.use("Agg", force=True)
-        import matplotlib.pyplot as plt
+        import matplotlib.figure  # noqa: F401 - the Figure class used below
     except ImportError:
         raise MissingDependencyError("plotting needs matplotlib: pip install 'vibsynth[research]'") from None
-    plt.rcParams.update(_RC)
-    return plt
+    return matplotlib
+
+
+def _new_figure(**kwargs: Any) -> Any:
+    """A Figure not registered with pyplot (garbage-collected like any object)."""
+    return _matplotlib().figure.Figure(**kwargs)
+
+
+def _styled(build: Callable[..., Any]) -> Callable[..., Any]:
+    """Run a figure builder inside a local style context (matplotlib's global rcParams stay untouched)."""
+
+    @functools.wraps(build)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with _matplotlib().rc_context(_RC):
+            return build(*args, **kwargs)
+
+    return wrapper
 
 
 def _save(fig: Any, path: str | os.PathLike[str]) -> Path:
     from vibsynth.formats.files import atomic_write_bytes
 
-    plt = _pyplot()
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=_DPI, bbox_inches="tight")
-    plt.close(fig)
+    with _matplotlib().rc_context(_RC):
+        fig.savefig(buffer, format="png", dpi=_DPI, bbox_inches="tight")
     atomic_write_bytes(path, buffer.getvalue())
     return Path(path)
 
@@ -76,9 +103,20 @@ def plot_basis(basis: Basis, path: str | os.PathLike[str]) -> Path:
     path : path-like
         PNG to write.
     """
-    plt = _pyplot()
+    return _save(basis_figure(basis), path)
+
+
+@_styled
+def basis_figure(basis: Basis) -> Any:
+    """The figure of :func:`plot_basis`: axes 0 is M, axes i the component Vi (line i's data).
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
     k = basis.n_components
-    fig, axes = plt.subplots(k + 1, 1, figsize=(7, 1.55 * (k + 1)), sharex=True)
+    fig = _new_figure(figsize=(7, 1.55 * (k + 1)))
+    axes = fig.subplots(k + 1, 1, sharex=True)
     f = basis.centres_hz
     axes[0].plot(f, basis.mean_db, "k-o", ms=3)
     axes[0].set_ylabel("M (dB)")
@@ -99,7 +137,7 @@ def plot_basis(basis: Basis, path: str | os.PathLike[str]) -> Path:
         )
     _freq_axis(axes[-1], basis)
     fig.text(0.005, 0.4, "component weight (dB per unit score)", rotation=90, fontsize=10)
-    return _save(fig, path)
+    return fig
 
 
 def plot_spectrum(
@@ -120,11 +158,22 @@ def plot_spectrum(
     variants : bool
         Also draw S2:8 and M (the paper's experiment-3 anchors); S1 and S1:8 are always drawn.
     """
-    plt = _pyplot()
+    return _save(spectrum_figure(spectra, basis, variants=variants), path)
+
+
+@_styled
+def spectrum_figure(spectra: Sequence[tuple[str, Any]], basis: Basis, *, variants: bool = False) -> Any:
+    """The figure of :func:`plot_spectrum`: one axes per recording, lines labelled as in its legend.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
     n = len(spectra)
     if n == 0:
         raise VibsynthError("plot spectrum needs at least one recording")
-    fig, axes = plt.subplots(n, 1, figsize=(7, 3.0 * n), sharex=True, squeeze=False)
+    fig = _new_figure(figsize=(7, 3.0 * n))
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)
     for ax, (label, band_db) in zip(axes[:, 0], spectra):
         measured = normalise_db(np.asarray(band_db, dtype=np.float64))
         scores = basis.scores(band_db)
@@ -141,7 +190,7 @@ def plot_spectrum(
         ax.set_title(label)
         ax.legend(loc="best")
     _freq_axis(axes[-1, 0], basis)
-    return _save(fig, path)
+    return fig
 
 
 def plot_presets(presets: Sequence[tuple[str, float, float]], basis: Basis, path: str | os.PathLike[str]) -> Path:
@@ -153,10 +202,21 @@ def plot_presets(presets: Sequence[tuple[str, float, float]], basis: Basis, path
     basis : Basis
     path : path-like
     """
-    plt = _pyplot()
+    return _save(presets_figure(presets, basis), path)
+
+
+@_styled
+def presets_figure(presets: Sequence[tuple[str, float, float]], basis: Basis) -> Any:
+    """The figure of :func:`plot_presets`: axes 0 the balance axis (one scatter), axes 1 the spectra.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
     if not presets:
         raise PresetError("no presets to plot")
-    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6.5), gridspec_kw={"height_ratios": [1.2, 1]})
+    fig = _new_figure(figsize=(8, 6.5))
+    ax, ax2 = fig.subplots(2, 1, gridspec_kw={"height_ratios": [1.2, 1]})
     names = [p[0] for p in presets]
     bal = np.array([p[1] for p in presets], dtype=np.float64)
     inten = np.array([p[2] for p in presets], dtype=np.float64)
@@ -179,7 +239,7 @@ def plot_presets(presets: Sequence[tuple[str, float, float]], basis: Basis, path
     ax2.set_ylabel("band power (dB, level-normalised)")
     ax2.legend(loc="best")
     fig.tight_layout()
-    return _save(fig, path)
+    return fig
 
 
 def plot_mds(mds: Any, path: str | os.PathLike[str], *, title: str = "") -> Path:
@@ -193,8 +253,19 @@ def plot_mds(mds: Any, path: str | os.PathLike[str], *, title: str = "") -> Path
     path : path-like
     title : str
     """
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7, 6.5))
+    return _save(mds_figure(mds, title=title), path)
+
+
+@_styled
+def mds_figure(mds: Any, *, title: str = "") -> Any:
+    """The figure of :func:`plot_mds` (one axes: rated and model scatters, error lines, V1 arrow).
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
+    fig = _new_figure(figsize=(7, 6.5))
+    ax = fig.subplots()
     rated, pred = mds.rated, mds.predicted
     for a, b in zip(rated, pred):
         ax.plot([a[0], b[0]], [a[1], b[1]], color="0.6", lw=1, zorder=1)
@@ -216,4 +287,4 @@ def plot_mds(mds: Any, path: str | os.PathLike[str], *, title: str = "") -> Path
     ax.set_ylabel("MDS dimension 2 (rating units)")
     ax.set_title(title or f"Perceptual space (Procrustes RMS error {mds.procrustes_rms:.3f})")
     ax.legend(loc="best")
-    return _save(fig, path)
+    return fig
