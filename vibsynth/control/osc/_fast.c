@@ -49,7 +49,7 @@ typedef int sock_t;
 #define MAX_DATAGRAM 65536
 #define MAX_BATCH 256
 #define SLOW_ARENA (1 << 20)
-#define TABLE_SIZE 4096 /* open addressing; > 4 x the largest table (14 + 8 x 64 addresses) */
+#define TABLE_SIZE 4096 /* open addressing; > 4 x the largest table (15 + 8 x 64 addresses) */
 #define MAX_ADDR 128
 #define MAX_NETS 64
 #define MAXCH 64

@@ -49,7 +49,7 @@ MAX_PATTERN_LEN = 256
 MAX_FANOUT = 1024
 """Most routes one pattern may lead to; a pattern matching more is an error (nothing is done).
 
-The table holds ``14 + 8 x channels`` routes, 526 at the maximum of 64 channels
+The table holds ``15 + 8 x channels`` routes, 527 at the maximum of 64 channels
 (``audio.channels``), so every pattern, ``/vibsynth/ch/*/intensity`` and even
 ``/vibsynth/*/*/*`` included, fits on every supported configuration; the cap bounds the
 work of one message should the table ever grow.
@@ -70,6 +70,7 @@ GLOBAL_METHODS = (
     "sync",
     "notify",
     "learn",
+    "monitor",
 )
 """Methods under ``{prefix}/``; they act on every channel (or on the server)."""
 

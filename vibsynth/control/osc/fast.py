@@ -19,6 +19,7 @@ from typing import Any
 from vibsynth.control.controller import Controller
 from vibsynth.control.osc import _fast as _oscfast
 from vibsynth.control.osc.address import AddressSpace
+from vibsynth.control.tap import InputTap
 
 __all__ = ["FAST_METHODS", "fast_table", "allow_networks", "make_receiver"]
 
@@ -60,11 +61,13 @@ def make_receiver(
     *,
     controller: Controller | None = None,
     space: AddressSpace | None = None,
+    tap: InputTap | None = None,
 ) -> Any:
     """A compiled receive loop on socket ``fd`` (its ``run()`` blocks until ``stop()``).
 
     With a controller whose engine has a compiled core, and an address space, the fast path
-    is on; otherwise every datagram goes to ``on_slow``.
+    is on; otherwise every datagram goes to ``on_slow``. Knob moves taken by the fast path are
+    published on ``tap`` (as the values they left, at most every 20 ms) while someone reads it.
     """
     core = getattr(getattr(controller, "engine", None), "_core", None)
     if controller is None or space is None or core is None:
@@ -73,6 +76,9 @@ def make_receiver(
 
     def on_state(updates: list[tuple[str, int, float]], last_seq: int) -> None:
         controller.record(updates, last_seq, source=SOURCE)
+        if tap is not None and tap.active:
+            for name, channel, value in updates:
+                tap.publish("osc-fast", f"{space.address_of(name, channel)} f {value:g}  (compiled fast path)")
 
     return _oscfast.Receiver(
         fd, core, fast_table(space), limits.balance_min, limits.balance_max, on_slow, on_state, allow_networks(allow)

@@ -22,6 +22,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 from vibsynth import __version__
@@ -37,6 +38,7 @@ from vibsynth.control.osc.codec import (
     iter_messages,
     ntp_to_unix,
 )
+from vibsynth.control.osc.monitor import MonitorWorker
 from vibsynth.control.osc.replies import (
     REPLY_AMPLIFICATION,
     ReplyBudget,
@@ -47,6 +49,7 @@ from vibsynth.control.osc.replies import (
 )
 from vibsynth.control.osc.speed import SpeedCurve
 from vibsynth.control.osc.workers import Notifier, PeerLike, SyncWorker, setter_message
+from vibsynth.control.tap import InputTap
 from vibsynth.errors import ParameterError, PresetError, ScheduleFullError, VibsynthError
 
 log = logging.getLogger(__name__)
@@ -147,6 +150,10 @@ class OscHandler:
         packets costs no reply traffic.
     extra_status : callable, optional
         Returns extra ``(key, value)`` pairs for ``/status`` (transport counters).
+    tap : InputTap, optional
+        Where received messages and answered errors are published (monitors, status).
+    monitor : MonitorWorker, optional
+        Serves ``/monitor`` (None: error reply).
     """
 
     def __init__(
@@ -161,6 +168,8 @@ class OscHandler:
         block_size: int | None = None,
         error_reply_rate: float = 500.0,
         extra_status: Callable[[], list[tuple[str, object]]] | None = None,
+        tap: InputTap | None = None,
+        monitor: MonitorWorker | None = None,
     ) -> None:
         self.controller = controller
         self.engine = controller.engine
@@ -172,6 +181,8 @@ class OscHandler:
         self.sync_worker = sync_worker
         self.block_size = block_size
         self.extra_status = extra_status
+        self.tap = tap if tap is not None else InputTap()
+        self.monitor = monitor
         self.clock = StreamClock(self.engine)
         self.stats = OscStats()
         self._error_bucket = _TokenBucket(error_reply_rate)
@@ -191,6 +202,7 @@ class OscHandler:
             "sync": self._on_sync,
             "notify": self._on_notify,
             "learn": self._on_learn,
+            "monitor": self._on_monitor,
         }
         # balance set by anything but /speed: the base that the speed shift is added to
         self._base_balance = [s.balance for s in controller.state()]
@@ -276,6 +288,8 @@ class OscHandler:
         self.stats.messages += 1
         if isinstance(peer, ReplyBudget):
             peer.request = msg.address
+        if self.tap.active:
+            self.tap.publish("osc", partial(describe_message, msg, peer, at_frame))
         try:
             routes = self.space.match(msg.address)
         except ParameterError as exc:
@@ -334,6 +348,7 @@ class OscHandler:
         if not self._error_bucket.take():
             self.stats.error_replies_suppressed += 1
             return
+        self.tap.error(f"{address}: {message} ({kind}, from {_sender(peer)})")
         room = peer.room if isinstance(peer, ReplyBudget) else None
         data = self._error_packet(address, redact_paths(message, self.prefix), room)
         if data is None:
@@ -595,6 +610,21 @@ class OscHandler:
             target.keep_alive = on  # a TCP subscriber may stay silent (no idle timeout)
         self._reply(peer, f"{self.prefix}/done", (f"{self.prefix}/notify", int(on)), "si")
 
+    def _on_monitor(self, msg: Message, channels, peer, at_frame) -> None:
+        _arg_count(msg, (1,), "1 = subscribe (renew within 30 s), 0 = unsubscribe")
+        on = _flag(msg, 0, "monitor")
+        if self.monitor is None:
+            raise VibsynthError("monitoring is not available")
+        if isinstance(peer, ReplyBudget):
+            raise VibsynthError("use TCP (osc.tcp) to monitor from another host; UDP only from this machine")
+        if on:
+            self.monitor.subscribe(peer)
+        else:
+            self.monitor.unsubscribe(peer)
+        if hasattr(peer, "keep_alive"):
+            peer.keep_alive = on  # a TCP subscriber may stay silent (no idle timeout)
+        self._reply(peer, f"{self.prefix}/done", (f"{self.prefix}/monitor", int(on)), "si")
+
     def _on_learn(self, msg: Message, channels, peer, at_frame) -> None:
         _arg_count(msg, (1,), "knob name")
         name = _string(msg, 0, "knob")
@@ -614,6 +644,30 @@ def _midi_learn_hook() -> Callable[[str], bool] | None:
         return None
     hook = getattr(midi, "learn", None)
     return hook if callable(hook) else None
+
+
+def _sender(peer: PeerLike) -> str:
+    address = getattr(peer, "address", None)
+    if not address:
+        return "?"
+    return f"{'tcp' if not getattr(peer, 'datagram', True) else 'udp'} {address[0]}:{address[1]}"
+
+
+def _show_arg(value: object) -> str:
+    if isinstance(value, str):
+        return '"' + (value if len(value) <= 64 else value[:63] + "…") + '"'
+    if isinstance(value, (bytes, bytearray)):
+        return f"<blob {len(value)} bytes>"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def describe_message(msg: Message, peer: PeerLike, at_frame: int | None = None) -> str:
+    """One line for a monitor, like oscdump: ``/vibsynth/ch/1/intensity f 0.5  (udp 127.0.0.1:5000)``."""
+    args = " ".join(_show_arg(a) for a in msg.args[:16]) + (" …" if len(msg.args) > 16 else "")
+    when = f" at frame {at_frame}" if at_frame is not None else ""
+    return f"{msg.address} {msg.types} {args}".rstrip() + f"  ({_sender(peer)}{when})"
 
 
 def _engine_stat(engine: Any, names: Sequence[str], default: float) -> float:

@@ -10,6 +10,7 @@ from vibsynth.control.controller import Controller
 from vibsynth.control.osc.address import normalize_prefix
 from vibsynth.control.osc.fast import make_receiver
 from vibsynth.control.osc.handler import OscHandler
+from vibsynth.control.osc.monitor import MonitorWorker
 from vibsynth.control.osc.replies import _LOOPBACK
 from vibsynth.control.osc.speed import SpeedCurve
 from vibsynth.control.osc.transport import (
@@ -22,6 +23,7 @@ from vibsynth.control.osc.transport import (
     UdpTransport,
 )
 from vibsynth.control.osc.workers import Notifier, PeerLike, SyncWorker
+from vibsynth.control.tap import InputTap
 from vibsynth.errors import ConfigError
 from vibsynth.settings.allow_list import resolve_allow_list
 
@@ -69,6 +71,9 @@ class OscServer:
         allow_set = resolve_allow_list(allow)
         prefix = normalize_prefix(prefix)
         self.notifier = Notifier(controller, prefix, rate_hz=notify_rate_hz)
+        existing = getattr(controller, "tap", None)
+        self.tap = existing if isinstance(existing, InputTap) else InputTap()
+        self.monitor = MonitorWorker(self.tap, prefix)
         self.sync_worker = SyncWorker(controller, self._reply_synced, timeout_s=schedule_horizon_s + 2.0)
         self.handler = OscHandler(
             controller,
@@ -79,6 +84,8 @@ class OscServer:
             sync_worker=self.sync_worker,
             block_size=block_size,
             extra_status=self._status_extras,
+            tap=self.tap,
+            monitor=self.monitor,
         )
         self.udp = UdpTransport(
             host,
@@ -88,7 +95,7 @@ class OscServer:
             reply_port=reply_port,
             rcvbuf=rcvbuf,
             stats=self.stats,
-            receiver_factory=partial(make_receiver, controller=controller, space=self.handler.space),
+            receiver_factory=partial(make_receiver, controller=controller, space=self.handler.space, tap=self.tap),
         )
         self.tcp = (
             TcpTransport(
@@ -97,7 +104,7 @@ class OscServer:
                 self.handler.handle_batch,
                 allow=allow_set,
                 stats=self.stats,
-                on_close=self.notifier.unsubscribe,
+                on_close=self._closed,
                 max_connections=tcp_max_connections,
                 max_per_peer=tcp_max_per_peer,
                 idle_timeout_s=tcp_idle_timeout_s,
@@ -106,6 +113,11 @@ class OscServer:
             else None
         )
         self._started = False
+
+    def _closed(self, peer: PeerLike) -> None:
+        """A TCP connection closed: end its subscriptions."""
+        self.notifier.unsubscribe(peer)
+        self.monitor.unsubscribe(peer)
 
     def _reply_synced(self, peer: PeerLike, sync_id: int, ok: bool) -> None:
         self.handler.reply_synced(peer, sync_id, ok)
@@ -163,6 +175,7 @@ class OscServer:
                 "(set osc.port or --osc-port)"
             ) from None
         self.notifier.start()
+        self.monitor.start()
         self.sync_worker.start()
         self.udp.start()
         if self.tcp is not None:
@@ -176,6 +189,7 @@ class OscServer:
         if self.tcp is not None:
             self.tcp.stop()
         self.notifier.stop()
+        self.monitor.stop()
         self.sync_worker.stop()
         self.handler.close()
         self._started = False
@@ -185,7 +199,7 @@ class OscServer:
         host = self.udp.host
         text = f"OSC on udp://{host}:{self.udp.port}{self.handler.prefix or '/'}"
         if self.tcp is not None:
-            text += f" and tcp://{host}:{self.udp.port} (SLIP)"
+            text += f" and tcp://{host}:{self.udp.port} (SLIP or length-prefixed)"
         if self.udp.rcvbuf:
             text += f", receive buffer {self.udp.rcvbuf // 1024} KiB"
         if host not in _LOOPBACK:
