@@ -84,6 +84,9 @@ class NoReplyError(VibsynthError, TimeoutError):
             text += f" (to {request}; is `vibsynth serve` running there?)"
         super().__init__(text)
 
+    def __reduce__(self) -> tuple[type[NoReplyError], tuple[str, int, float, str]]:
+        return type(self), (self.host, self.port, self.timeout, self.request)
+
 
 class ServerError(VibsynthError):
     """A server refused a request: it answered ``/vibsynth/error address message`` (nothing changed).
@@ -105,3 +108,6 @@ class ServerError(VibsynthError):
         if len(self.errors) > 1:
             text += f" (and {len(self.errors) - 1} more error(s))"
         super().__init__(text)
+
+    def __reduce__(self) -> tuple[type[ServerError], tuple[str, str, tuple[tuple[str, str], ...]]]:
+        return type(self), (self.address, self.message, self.errors)

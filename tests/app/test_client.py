@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
+import pickle
 import random
 import socket
 import struct
@@ -168,6 +169,8 @@ def test_server_error_replies_raise_server_error(live):
         assert "outside the allowed range" in info.value.message
         assert [a for a, _ in info.value.errors] == ["/vibsynth/balance", "/vibsynth/ch/2/preset"]
         assert "unknown preset" in info.value.errors[1][1]
+        copy = pickle.loads(pickle.dumps(info.value))  # crosses process boundaries intact
+        assert (type(copy), str(copy), copy.errors) == (ServerError, str(info.value), info.value.errors)
         c.sync()  # reported once
         assert c.get("intensity", 1) == pytest.approx(0.4)  # the valid one was applied
         assert c.get("balance", 1) == 0.0

@@ -971,7 +971,7 @@ class Client(_Commands):
     def status(self, timeout: float | None = None) -> dict[str, Any]:
         """The server's ``/status.reply`` as a dict (docs/osc.md lists the keys).
 
-        E.g. ``{"version": "0.1.0", "channels": 2, "rate": 48000.0, ..., "ch1.intensity": 0.5, ...}``;
+        E.g. ``{"version": "<vibsynth.__version__>", "channels": 2, "rate": 48000.0, ..., "ch1.intensity": 0.5, ...}``;
         -1 means the engine does not report that value.
 
         Raises

@@ -166,23 +166,23 @@ def exchange(client: Client, data: bytes, wait_s: float) -> tuple[list[Reply], b
     client.send_packet(encode_message(ping, (token, "vibsynth send"), "is"))
     replies: list[Reply] = []
     answered = False
-    started = time.monotonic()
-    deadline = started + (wait_s if wait_s > 0 else CONFIRM_S)
+    deadline = time.monotonic() + (wait_s if wait_s > 0 else CONFIRM_S)
+    last = -math.inf  # arrival of the last reply to the message
     while True:
         now = time.monotonic()
         remaining = deadline - now
         if answered and (wait_s <= 0 or replies):
-            remaining = min(remaining, _QUIET_S if wait_s > 0 else 0.0)
+            remaining = min(remaining, last + _QUIET_S - now if wait_s > 0 else 0.0)
         if remaining <= 0:
             return replies, answered
         for reply in client.receive(remaining):
+            answered = True
             if reply.address == f"{client.prefix}/pong" and reply.args == (token, "vibsynth send"):
-                answered = True
-            elif _is_error(reply) and reply.args[0] == ping:
-                answered = True  # a server under another prefix: it answered, about our ping
-            else:
-                replies.append(reply)
-                answered = True
+                continue
+            if _is_error(reply) and reply.args[0] == ping:
+                continue  # a server under another prefix: it answered, about our ping
+            replies.append(reply)
+            last = time.monotonic()
 
 
 def _is_error(reply: Reply) -> bool:
