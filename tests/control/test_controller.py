@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -62,6 +63,74 @@ def test_concurrent_setters_leave_state_equal_to_the_engine(bank):
     for _ in range(10):
         engine.render_into(out)
     assert engine.knob_values()[0][0] == ctl.get("intensity")
+
+
+class OrderEngine:
+    """Records what reaches the engine, in order; yields the GIL inside submit to invite races."""
+
+    channels, fs = 1, 48000.0
+
+    def __init__(self) -> None:
+        self.submitted: list[float] = []
+        self._guard = threading.Lock()  # the list itself; not the controller's ordering
+
+    def submit(self, command) -> int:
+        with self._guard:
+            self.submitted.append(command.value)
+            seq = len(self.submitted)
+        time.sleep(0)  # let another setter run between this submit and the controller's bookkeeping
+        return seq
+
+    applied_seq = property(lambda self: len(self.submitted))
+    frame_position = property(lambda self: 0)
+
+
+def test_many_threads_on_one_knob_leave_the_state_at_the_last_submitted_value():
+    """Submission and bookkeeping are one step: the recorded target is what the engine got last."""
+    engine = OrderEngine()
+    ctl = Controller(engine)
+    start = threading.Barrier(8)
+
+    def setter(seed: int) -> None:
+        values = np.random.default_rng(seed).uniform(0, 1, 400)
+        start.wait()
+        for v in values:
+            ctl.set_knob("intensity", float(v))
+
+    for trial in range(5):
+        threads = [threading.Thread(target=setter, args=(100 * trial + s,)) for s in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert len(engine.submitted) == (trial + 1) * 8 * 400
+        assert ctl.get("intensity") == engine.submitted[-1]
+        start.reset()
+
+
+def test_a_setter_waits_for_the_one_inside_submit():
+    """Deterministic interleaving: while A is inside ``engine.submit``, B cannot overtake it."""
+    a_inside, b_done = threading.Event(), threading.Event()
+
+    class SlowFirstSubmit(OrderEngine):
+        def submit(self, command) -> int:
+            if command.value == 0.25:  # A: hold the submit until B finished (or 2 s passed)
+                a_inside.set()
+                b_done.wait(2.0)
+            return super().submit(command)
+
+    engine = SlowFirstSubmit()
+    ctl = Controller(engine)
+    a = threading.Thread(target=ctl.set_knob, args=("intensity", 0.25))
+    a.start()
+    assert a_inside.wait(10.0)
+    b = threading.Thread(target=lambda: (ctl.set_knob("intensity", 0.75), b_done.set()))
+    b.start()
+    a.join(10.0)
+    b.join(10.0)
+    # a racy controller lets B submit and record 0.75 first, then A records 0.25 over it
+    assert engine.submitted == [0.25, 0.75]
+    assert ctl.get("intensity") == 0.75
 
 
 def test_schedule_cap_is_an_error_and_changes_nothing(bank):
