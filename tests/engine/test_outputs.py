@@ -1,10 +1,14 @@
-"""Null and WAV outputs, device resolution, and the serve fallback logic (no sound card needed)."""
+"""Null and WAV outputs, device resolution, and the serve fallback logic (no sound card needed).
+
+Time is driven explicitly: the null output and the supervisor run on fake clocks and are
+stepped by the tests; fake PortAudio streams are "played" by calling the engine's compiled
+callback (``run_callback``). Real threads are waited for on conditions with generous deadlines.
+"""
 
 from __future__ import annotations
 
 import logging
-import threading
-import time
+import sys
 import types
 
 import numpy as np
@@ -15,20 +19,66 @@ from vibsynth.app.service import open_output
 from vibsynth.engine import outputs
 from vibsynth.engine.engine import Engine
 from vibsynth.engine.outputs import NullOutput, SoundDeviceOutput, WavOutput, resolve_device
+from vibsynth.engine.supervisor import Backoff
 from vibsynth.errors import DeviceError, ParameterError
 from vibsynth.settings.config import load_config
+
+from .waiting import returns, wait_until
+
+
+class Clock:
+    def __init__(self, t: float = 100.0) -> None:
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
 
 
 def test_null_output_is_paced_by_the_clock(small_bank):
     e = Engine(small_bank, initial_intensity=0.5, max_block=64)
+    clock = Clock()
+    out = NullOutput(e, block_size=64, clock=clock)
+    period = 64 / e.fs
+    # the clock does not move: each block is due one period after the previous one
+    delays = [out.step() for _ in range(4)]
+    np.testing.assert_allclose(delays, period * np.arange(1, 5))
+    # waiting what it asks keeps it exactly on time: one block per period, no underflow
+    for _ in range(100):
+        clock.t += out.step()
+    assert e.frame_position == 104 * 64 and out.stats.callbacks == 104 and out.stats.underflows == 0
+    assert out.step() == pytest.approx(period)  # back on schedule: the next block is one period away
+    # what it renders is the engine's output, block after block
+    ref = Engine(small_bank, initial_intensity=0.5, max_block=64)
+    ref.render(104 * 64)
+    np.testing.assert_array_equal(out.last_block, ref.render(64))
+
+
+def test_null_output_counts_a_late_block_and_resyncs(small_bank):
+    e = Engine(small_bank, max_block=64)
+    clock = Clock()
+    out = NullOutput(e, block_size=64, max_lag_s=0.05, clock=clock)
+    period = 64 / e.fs
+    clock.t += out.step()
+    clock.t += 0.04  # late, but within max_lag_s
+    assert out.step() < 0 and out.stats.underflows == 0
+    clock.t += 0.2  # the machine stalled
+    assert out.step() < -0.05
+    assert out.stats.underflows == 1 and e.stats.underflows == 1
+    assert out.step() == pytest.approx(period)  # resynced to now: no burst of catch-up blocks
+
+
+def test_null_output_thread_renders_until_stopped(small_bank):
+    e = Engine(small_bank, max_block=64)
     out = NullOutput(e, block_size=64)
     out.start()
-    assert out.is_running()
-    time.sleep(0.3)
-    out.stop()
+    try:
+        assert out.is_running()
+        wait_until(lambda: out.stats.callbacks >= 3, "the null output renders blocks")
+    finally:
+        out.stop()
     assert not out.is_running()
-    seconds = e.frame_position / e.fs
-    assert 0.15 < seconds < 0.6  # real time, not as fast as possible
+    frames = e.frame_position
+    assert frames == out.stats.callbacks * 64  # whole blocks, and nothing after stop
 
 
 def test_wav_output_renders_the_duration(tmp_path, small_bank):
@@ -158,7 +208,7 @@ def _has_osc() -> bool:
 
 
 class _FakeStream:
-    """A PortAudio stream stand-in: while active, a thread calls the engine's callback every 5 ms."""
+    """A PortAudio stream stand-in, played by the test: :meth:`play` calls the engine's compiled callback."""
 
     opened: list[_FakeStream] = []
     engine: Engine | None = None
@@ -174,15 +224,15 @@ class _FakeStream:
         self.closed = False
         _FakeStream.opened.append(self)
 
-    def _run(self):
+    def play(self, blocks: int = 3) -> None:
+        """What PortAudio does while the stream runs: a few callbacks (the heartbeat moves)."""
         buf = np.zeros((64, 1), dtype=np.float32)
-        while self.active:
-            _FakeStream.engine._core.run_callback(buf, 0)
-            time.sleep(0.005)
+        for _ in range(blocks):
+            if self.active:
+                _FakeStream.engine._core.run_callback(buf, 0)
 
     def start(self):
         self.active = True
-        threading.Thread(target=self._run, daemon=True).start()
 
     def stop(self):
         self.active = False
@@ -211,35 +261,84 @@ def _fake_portaudio(sd):
     sd._terminate = terminate
 
 
-def test_supervisor_restarts_the_stream_after_a_device_error(small_bank, monkeypatch):
+def _fake_sd_output(bank, monkeypatch, **kwargs) -> SoundDeviceOutput:
     _FakeStream.opened = []
     sd = fake_sd(DEVICES, APIS, default_out=1)
     sd._StreamBase = _FakeStream
     sd._ffi = types.SimpleNamespace(cast=lambda ctype, value: value)
     _fake_portaudio(sd)
     monkeypatch.setattr(outputs, "import_sounddevice", lambda: sd)
-    out = SoundDeviceOutput(Engine(small_bank, channels=1), block_size=64)
+    out = SoundDeviceOutput(Engine(bank, channels=1), block_size=64, **kwargs)
     _FakeStream.engine = out.engine
+    return out
+
+
+def test_supervisor_restarts_the_stream_after_a_device_error(small_bank, monkeypatch):
+    clock = Clock(1000.0)
+    out = _fake_sd_output(small_bank, monkeypatch, restart=False, clock=clock)
     out.start()
     try:
         first = _FakeStream.opened[0]
-        deadline = time.monotonic() + 5.0
-        while out.state != "streaming" and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert out.is_running() and out.state == "streaming"
+        assert out.state == "starting"
+        first.play()
+        assert out.supervisor.step() == "streaming" and out.is_running()
         first.device_error()
-        while out.state != "device lost" and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert out.state_reason == "stream stopped"
-        while out.state != "streaming" and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert out.state == "streaming" and out.stats.restarts == 1
-        assert out.supervisor.recovered_after_s < 1.0  # first retry after 0.25 s
-        assert first.closed and len(_FakeStream.opened) == 2
-        assert out.is_running() and _FakeStream.opened[1].active
+        clock.t += 0.05
+        assert out.supervisor.step() == "device lost" and out.state_reason == "stream stopped"
+        assert first.closed and not out.is_running()
+        clock.t += 0.2
+        assert out.supervisor.step() == "device lost" and len(_FakeStream.opened) == 1  # back-off: 0.25 s
+        clock.t += 0.05
+        assert out.supervisor.step() == "recovering" and len(_FakeStream.opened) == 2
+        second = _FakeStream.opened[1]
+        assert second.active and out.state_reason == "stream stopped"
+        second.play()
+        clock.t += 0.05
+        assert out.supervisor.step() == "streaming" and out.state_reason == ""
+        assert out.supervisor.recovered_after_s == pytest.approx(0.30)  # lost at +0.05, streaming at +0.35
+        assert out.stats.restarts == 1 and out.engine.stats.output_errors == 1
         # the new stream runs the same engine's compiled callback
-        assert (_FakeStream.opened[1].callback, _FakeStream.opened[1].userdata) == out.engine.callback_addresses()
+        assert (second.callback, second.userdata) == out.engine.callback_addresses()
     finally:
         out.stop()
-    assert not _FakeStream.opened[1].active and _FakeStream.opened[1].closed
+    assert not second.active and second.closed
     assert out.state == "stopped"
+
+
+def test_supervisor_thread_brings_the_stream_back(small_bank, monkeypatch):
+    """The real supervisor thread (restart=True); no heartbeat timeout, so only the device error counts."""
+    interval = sys.getswitchinterval()
+    out = _fake_sd_output(small_bank, monkeypatch, heartbeat_timeout_s=3600.0, backoff=Backoff(0.01, 0.01))
+    out.start()
+    try:
+        first = _FakeStream.opened[0]
+        first.play()
+        wait_until(lambda: out.state == "streaming", "streaming after the first blocks")
+        first.device_error()
+        wait_until(lambda: len(_FakeStream.opened) == 2, "the supervisor thread reopens the stream")
+        second = _FakeStream.opened[1]
+        wait_until(lambda: out.state == "recovering", "recovering until the new stream plays")
+        second.play()
+        wait_until(lambda: out.state == "streaming", "streaming again")
+        assert out.stats.restarts == 1 and first.closed and second.active
+    finally:
+        returns(out.stop, "stop")
+    assert out.state == "stopped" and second.closed
+    assert sys.getswitchinterval() == interval  # the output never touches the GIL switch interval
+
+
+def test_outputs_and_serve_leave_the_switch_interval_alone(small_bank, no_portaudio, tmp_path, capsys):
+    """The compiled callback needs no GIL: nothing sets sys.setswitchinterval any more."""
+    from vibsynth.cli import main
+
+    interval = sys.getswitchinterval()
+    out = NullOutput(Engine(small_bank), block_size=64)
+    out.start()
+    wait_until(lambda: out.stats.callbacks > 0, "the null output renders")
+    out.stop()
+    assert sys.getswitchinterval() == interval
+    config = tmp_path / "config.yaml"
+    config.write_text(f"bank:\n  cache_dir: {tmp_path / 'cache'}\n  loop_seconds: 0.5\n  levels: 5\n")
+    flags = ["--no-osc"] if _has_osc() else []
+    assert main(["serve", "--config", str(config), "--seconds", "0.05", *flags]) == 0
+    assert sys.getswitchinterval() == interval

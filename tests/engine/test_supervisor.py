@@ -4,14 +4,15 @@ A fake sounddevice module stands in for PortAudio. Like the real one, it only se
 devices at ``Pa_Initialize`` (so a restarted JACK server needs a re-scan), and its
 streams can die (JACK: inactive, no finished callback; ALSA: finished callback), or
 hang in open / terminate. Time is driven explicitly: the supervisor runs on a fake
-clock and ``supervisor.step()`` is called by the tests (``restart=False``).
+clock and ``supervisor.step()`` is called by the tests (``restart=False``). Where a real
+thread must be waited for (an abandoned call, the supervisor thread), the tests wait on a
+condition with a generous deadline, never for a fixed time, and assert no durations.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
-import time
 import types
 
 import numpy as np
@@ -35,6 +36,8 @@ from vibsynth.engine.supervisor import (
     hung_calls,
 )
 from vibsynth.errors import DeviceError
+
+from .waiting import returns, wait_until
 
 JACK_API = {"name": "JACK Audio Connection Kit", "default_output_device": 1}
 ALSA_API = {"name": "ALSA", "default_output_device": 0}
@@ -60,6 +63,7 @@ class World:
     def __init__(self, jack_up: bool = True) -> None:
         self.jack_up = jack_up
         self.hang = threading.Event()  # set() releases every hung call
+        self.hanging_open = threading.Event()  # set while an open is hung
         self.hang_open = False
         self.hang_terminate = False
         self.open_error: str | None = None
@@ -97,6 +101,7 @@ class FakeLib:
 class FakeStream:
     def __init__(self, sd: FakeSd, kind="output", *, callback, userdata, finished_callback, **kwargs) -> None:
         if sd.world.hang_open:
+            sd.world.hanging_open.set()
             sd.world.hang.wait()
         if sd.world.open_error:
             raise RuntimeError(sd.world.open_error)
@@ -225,32 +230,32 @@ def test_call_with_timeout_returns_raises_or_abandons():
     with pytest.raises(ZeroDivisionError):
         call_with_timeout(lambda: 1 / 0, 1.0, "dividing")
     release = threading.Event()
-    started = time.monotonic()
-    with pytest.raises(HungCallError, match="Pa_Terminate did not return within 0.1 s"):
-        call_with_timeout(release.wait, 0.1, "Pa_Terminate")
-    assert time.monotonic() - started < 0.5
-    assert "Pa_Terminate" in hung_calls()
-    release.set()
-    deadline = time.monotonic() + 2.0
-    while "Pa_Terminate" in hung_calls() and time.monotonic() < deadline:
-        time.sleep(0.01)
-    assert "Pa_Terminate" not in hung_calls()
+    try:
+        # release.wait() would block forever: the call returns only because it is abandoned
+        with pytest.raises(HungCallError, match="Pa_Terminate did not return within 0.1 s"):
+            returns(lambda: call_with_timeout(release.wait, 0.1, "Pa_Terminate"), "call_with_timeout")
+        assert "Pa_Terminate" in hung_calls()
+    finally:
+        release.set()
+    wait_until(lambda: "Pa_Terminate" not in hung_calls(), "the abandoned call leaves the list once it returns")
     assert issubclass(HungCallError, DeviceError)
 
 
 def test_exit_guard_exits_with_code_0_after_the_deadline_unless_cancelled():
     codes: list[int] = []
-    guard = ExitGuard(0.1, exit=codes.append)
+    guard = ExitGuard(0.0, exit=codes.append)
+    assert not guard.armed and not guard.join(0)
     guard.arm()
-    guard.arm()  # idempotent
-    time.sleep(0.5)
+    guard.arm()  # idempotent: one countdown
+    assert guard.armed and guard.join(20.0)
     assert codes == [0] and guard.fired
     quiet: list[int] = []
-    guard = ExitGuard(0.1, exit=quiet.append)
+    guard = ExitGuard(3600.0, exit=quiet.append)  # cancelled long before its deadline
     guard.arm()
     guard.cancel()
-    time.sleep(0.3)
+    assert guard.join(20.0)  # the countdown ended early, without exiting
     assert quiet == [] and not guard.fired
+    assert ExitGuard(0.0, exit_code=3, exit=codes.append).exit_code == 3
 
 
 # ---------------------------------------------------------------------- JACK server death
@@ -366,9 +371,7 @@ def test_an_open_that_hangs_forever_is_abandoned(small_bank, sd, world):
     clock.advance(0.05)
     out.supervisor.step()
     clock.advance(0.3)
-    started = time.monotonic()
-    assert out.supervisor.step() == LOST
-    assert time.monotonic() - started < 1.0
+    assert returns(out.supervisor.step, "a retry whose open hangs forever") == LOST
     assert "opening the audio device did not return within 0.2 s" in out.supervisor.last_error
     assert "opening the audio device" in hung_calls()
     assert out._runtime.dirty  # that instance is never used again
@@ -376,9 +379,8 @@ def test_an_open_that_hangs_forever_is_abandoned(small_bank, sd, world):
     world.hang_open = False
     run_until(out, clock, STREAMING, beat=True)
     assert out._runtime.generation == generation + 1
-    started = time.monotonic()
-    out.stop()
-    assert time.monotonic() - started < 1.5
+    returns(out.stop, "stop with an abandoned open still hanging")
+    assert out.state == STOPPED
 
 
 def test_retries_wait_while_two_portaudio_calls_are_hung(small_bank, sd, world):
@@ -404,9 +406,7 @@ def test_retries_wait_while_two_portaudio_calls_are_hung(small_bank, sd, world):
     assert FakeLib.loaded == opened  # no new library copy, no new call
     world.hang_open = False
     world.hang.set()  # the driver wakes up: the hung opens return
-    deadline = time.monotonic() + 2.0
-    while out._runtime.hung() and time.monotonic() < deadline:
-        time.sleep(0.01)
+    wait_until(lambda: not out._runtime.hung(), "the hung opens return")
     run_until(out, clock, STREAMING, beat=True)
     out.stop()
 
@@ -419,26 +419,18 @@ def test_stop_while_a_retry_hangs_returns_in_bounded_time(small_bank, sd, world)
         heartbeat_timeout_s=0.2,
         backoff=Backoff(0.05, 0.1),
     )
-    out.start()
+    out.start()  # the real supervisor thread
     world.hang_open = True
     sd.streams[0].jack_server_died()
-    deadline = time.monotonic() + 5.0
-    while out.supervisor.attempts == 0:
-        assert time.monotonic() < deadline, "no retry started"
-        time.sleep(0.02)
-    time.sleep(0.1)  # the supervisor is now inside the hung open
-    started = time.monotonic()
-    out.stop()
-    assert time.monotonic() - started < 1.5
-    assert out.state == STOPPED
+    assert world.hanging_open.wait(20.0), "no retry reached the open"  # the supervisor is inside it now
+    returns(out.stop, "stop while the supervisor thread is inside a hung open")
+    assert out.state == STOPPED and not world.hang.is_set()  # it did not wait for the open
 
 
 def test_shutdown_with_a_hanging_terminate_gives_up_and_disarms_the_exit_hook(sd, world):
     runtime = PortAudioRuntime(sd, call_timeout_s=0.2)
     world.hang_terminate = True
-    started = time.monotonic()
-    assert runtime.shutdown() is False
-    assert time.monotonic() - started < 1.0
+    assert returns(runtime.shutdown, "shutdown with Pa_Terminate hanging forever") is False
     assert sd._initialized == 0  # sounddevice's atexit hook will not call Pa_Terminate again
 
 

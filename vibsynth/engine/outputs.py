@@ -529,34 +529,68 @@ class NullOutput(OutputBackend):
     """Renders blocks in real time (monotonic clock) and discards them.
 
     A block more than ``max_lag_s`` late counts as an underflow and the clock resyncs.
+
+    Parameters
+    ----------
+    engine : Engine
+    block_size : int
+        Frames per block.
+    max_lag_s : float
+        Lateness that counts as an underflow.
+    clock : callable
+        Monotonic seconds (default :func:`time.monotonic`; tests pass a fake clock and
+        call :meth:`step` themselves).
     """
 
     name = "null"
 
-    def __init__(self, engine: Engine, *, block_size: int = 128, max_lag_s: float = 0.05) -> None:
+    def __init__(
+        self,
+        engine: Engine,
+        *,
+        block_size: int = 128,
+        max_lag_s: float = 0.05,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         super().__init__(engine)
         if block_size < 1:
             raise ParameterError(f"block size must be >= 1, got {block_size}")
         self.block_size = int(block_size)
         self.max_lag_s = float(max_lag_s)
+        self.clock = clock
         self._buffer = np.zeros((self.block_size, engine.channels), dtype=np.float32)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._next_t: float | None = None
         self.last_block: np.ndarray = self._buffer
 
+    def step(self) -> float:
+        """Render one block and schedule the next one a block period later.
+
+        Returns
+        -------
+        delay : float
+            Seconds until the next block is due (<= 0: due now). A block more than
+            ``max_lag_s`` late counts as an underflow and the schedule restarts from now.
+        """
+        if self._next_t is None:
+            self._next_t = self.clock()
+        self.engine.render_into(self._buffer)
+        self.stats.callbacks += 1
+        self._next_t += self.block_size / self.engine.fs
+        now = self.clock()
+        delay = self._next_t - now
+        if -delay > self.max_lag_s:
+            self._count_underflow()
+            self._next_t = now
+        return delay
+
     def _run(self) -> None:
-        period = self.block_size / self.engine.fs
-        next_t = time.monotonic()
+        self._next_t = None
         while not self._stop.is_set():
-            self.engine.render_into(self._buffer)
-            self.stats.callbacks += 1
-            next_t += period
-            delay = next_t - time.monotonic()
+            delay = self.step()
             if delay > 0:
                 self._stop.wait(delay)
-            elif -delay > self.max_lag_s:
-                self._count_underflow()
-                next_t = time.monotonic()
 
     def start(self) -> None:
         if self._thread is None:

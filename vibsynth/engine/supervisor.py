@@ -362,6 +362,7 @@ class ExitGuard:
         self._exit = exit
         self._armed = threading.Event()
         self._cancelled = threading.Event()
+        self._thread: threading.Thread | None = None
         self.fired = False
 
     @property
@@ -373,10 +374,20 @@ class ExitGuard:
         if self._armed.is_set():
             return
         self._armed.set()
-        threading.Thread(target=self._countdown, name="vibsynth-exit-guard", daemon=True).start()
+        self._thread = threading.Thread(target=self._countdown, name="vibsynth-exit-guard", daemon=True)
+        self._thread.start()
 
     def cancel(self) -> None:
+        """Stop the countdown (the process is exiting by itself)."""
         self._cancelled.set()
+
+    def join(self, timeout_s: float | None = None) -> bool:
+        """Wait until the countdown ended (fired or cancelled); True if it did within ``timeout_s``."""
+        thread = self._thread
+        if thread is None:
+            return False
+        thread.join(timeout_s)
+        return not thread.is_alive()
 
     def _countdown(self) -> None:
         if self._cancelled.wait(self.deadline_s):
