@@ -143,9 +143,7 @@ def test_notes_gate_the_texture_in_a_file(tmp_path, bank):
 
 
 def test_render_through_service_build_engine(tmp_path):
-    service = pytest.importorskip(
-        "vibsynth.app.service", reason="vibsynth.app.service (engine wiring) is not there yet"
-    )
+    from vibsynth.app import service
     from vibsynth.settings.config import load_config
 
     path = tmp_path / "short.mid"
