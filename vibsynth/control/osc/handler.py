@@ -541,9 +541,17 @@ class OscHandler:
         # "device lost" with the reason while it is retried.
         output = getattr(ctl, "output", None)
         if output is not None:
+            describe = getattr(output, "describe", None)
             pairs += [
                 ("output", str(getattr(output, "state", ""))),
                 ("output_reason", str(getattr(output, "state_reason", ""))),
+                ("device", fit_osc_string(str(describe()) if callable(describe) else "", 400)),
+            ]
+        errors = self.tap.last_errors()
+        if errors:
+            pairs += [
+                ("last_error", fit_osc_string(errors[-1].text, 400)),
+                ("last_error_age", float(max(0.0, time.time() - errors[-1].time))),
             ]
         if self.extra_status is not None:
             pairs.extend(self.extra_status())
