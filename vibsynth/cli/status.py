@@ -54,7 +54,7 @@ def channels_of(status: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def _pct(value: object) -> str:
-    return f"{100 * float(value):.1f} %" if isinstance(value, (int, float)) and value >= 0 else "?"  # type: ignore[operator]
+    return f"{100 * float(value):.1f} %" if isinstance(value, (int, float)) and value >= 0 else "?"
 
 
 def _v(status: dict[str, Any], key: str) -> str:
