@@ -131,3 +131,21 @@ def test_encode_decode_round_trip(basis, tmp_path, capsys, monkeypatch):
     assert main(["decode", str(tmp_path / "bad.vbt"), "-o", str(tmp_path / "o2.wav")]) == 2
     assert "truncated" in capsys.readouterr().err
     assert not (tmp_path / "o2.wav").exists()
+
+
+def test_encode_codes_a_non_stationary_recording_per_window(tmp_path, basis, capsys):
+    fs = 2800.0
+    x = synthesize(basis.mean_db, fs=fs, n_samples=int(6 * fs), level_db=-40.0, rng=np.random.default_rng(0)).signal
+    ramp = x * 10 ** (np.linspace(-30, 0, x.size) / 20)
+    src = tmp_path / "ramp.wav"
+    write_wav(src, 0.5 * ramp / np.max(np.abs(ramp)), fs)
+    assert main(["encode", str(src), "-o", str(tmp_path / "r.vbt"), "--json"]) == 0
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)
+    assert report["segmentation"]["fell_back"] and not report["segmentation"]["segments"]
+    assert report["segmentation"]["window_level_error_db"] > 10
+    assert "not stationary" in captured.err and "coded every window instead" in captured.err
+    assert report["quality"]["window_level_max_db"] < 6  # the windows' intensity survives
+    assert main(["encode", str(src), "-o", str(tmp_path / "k.vbt"), "--json", "--keep-segments"]) == 0
+    kept = json.loads(capsys.readouterr().out)
+    assert kept["segmentation"]["segments"] and kept["quality"]["window_level_max_db"] > 10

@@ -15,6 +15,9 @@ from vibsynth.errors import InputError, ParameterError
 ORDER = 55
 
 PAPER_RATE_HZ = 2800.0
+#: A segment whose intensity is further than this from one of its windows' own means the
+#: recording changes more than segments can say (real scans: up to 27 dB): code per window.
+MAX_SEGMENT_ERROR_DB = 6.0
 
 
 _bits = integer_in(2, 16, what="bits")
@@ -49,6 +52,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     enc.add_argument(
         "--per-window", action="store_true", help="no segmentation: code every window's own (noisy) values"
+    )
+    enc.add_argument(
+        "--max-segment-error-db",
+        type=number_in(0.0, 100.0, unit="dB"),
+        default=MAX_SEGMENT_ERROR_DB,
+        metavar="DB",
+        help="if merging windows into segments moves a window's intensity by more than this, the recording "
+        f"is not stationary enough for segments: code every window instead (default {MAX_SEGMENT_ERROR_DB:g} dB)",
+    )
+    enc.add_argument(
+        "--keep-segments", action="store_true", help="keep the segments even when they are far from the windows"
     )
     enc.add_argument("--rate", type=sample_rate, help="sample rate of CSV/TXT recordings (Hz)")
     enc.add_argument("--no-check", action="store_true", help="skip decoding to measure the quality")
@@ -140,19 +154,38 @@ def run_encode(args: argparse.Namespace) -> int:
     rec = read_recording(args.input, fs=args.rate)
     basis = basis_from_args(args)
     started = time.perf_counter()
-    try:
-        traj = encode_trajectory(
-            rec.samples,
-            fs=rec.fs,
-            basis=basis,
-            window_s=args.window_ms / 1000,
-            hop_s=args.hop_ms / 1000,
-            segment=not args.per_window,
-            tolerance_db=args.tolerance_db,
-            tolerance_t1=args.tolerance_t1,
-        )
-    except ParameterError as exc:
-        raise InputError(f"{rec.path}: {exc}") from None
+    segmentation: dict[str, Any] = {"segments": not args.per_window}
+
+    def encode(segment: bool) -> Any:
+        try:
+            return encode_trajectory(
+                rec.samples,
+                fs=rec.fs,
+                basis=basis,
+                window_s=args.window_ms / 1000,
+                hop_s=args.hop_ms / 1000,
+                segment=segment,
+                tolerance_db=args.tolerance_db,
+                tolerance_t1=args.tolerance_t1,
+            )
+        except ParameterError as exc:
+            raise InputError(f"{rec.path}: {exc}") from None
+
+    traj = encode(not args.per_window)
+    if not args.per_window:
+        segmentation["window_level_error_db"] = traj.window_level_error_db
+        if traj.window_level_error_db > args.max_segment_error_db:
+            note = (
+                f"{rec.path}: not stationary: segments were up to {traj.window_level_error_db:.1f} dB off the "
+                f"windows' own intensity (over --max-segment-error-db {args.max_segment_error_db:g}); "
+                "coded every window instead"
+            )
+            if args.keep_segments:
+                note = note.replace("coded every window instead", "kept the segments (--keep-segments)")
+            else:
+                traj = encode(False)
+                segmentation.update(segments=False, fell_back=True)
+            print(f"vibsynth: note: {note}", file=sys.stderr)
     quant = Quantizer.fit(traj, bits=args.bits)
     size = vbt.write_vbt(args.output, traj, quant)
     encode_s = time.perf_counter() - started
@@ -173,6 +206,7 @@ def run_encode(args: argparse.Namespace) -> int:
         "t1_range": [quant.t1_lo, quant.t1_hi],
         "t1_step": quant.t1_step,
         "clipped_windows": quant.clipped(traj),
+        "segmentation": segmentation,
         "encode_seconds": encode_s,
         **ratios(size, rec.samples.size, rec.fs),
     }

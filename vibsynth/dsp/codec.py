@@ -202,6 +202,10 @@ class Trajectory:
     t1 : ndarray, shape (n_frames,)
         First PCA score of each window (held through silent windows).
     basis_id : str
+    window_level_error_db : float
+        Largest difference between a loud window's own intensity and the value coded for it
+        (0 when every window keeps its own). Large values mean that segmentation flattened
+        real changes of a non-stationary recording. Not stored in ``.vbt`` files.
     """
 
     fs: float
@@ -211,6 +215,7 @@ class Trajectory:
     level_db: NDArray[np.float64]
     t1: NDArray[np.float64]
     basis_id: str
+    window_level_error_db: float = 0.0
 
     @property
     def n_frames(self) -> int:
@@ -458,8 +463,17 @@ def encode_trajectory(
         first = int(np.flatnonzero(~silent)[0])
         idx[idx < 0] = first
         t1_out = t1_out[idx]
+    loud = ~silent
+    error = float(np.max(np.abs(level_out[loud] - levels[loud]))) if loud.any() else 0.0
     return Trajectory(
-        fs=float(fs), n_samples=int(arr.size), window=window, hop=hop, level_db=level_out, t1=t1_out, basis_id=basis.id
+        fs=float(fs),
+        n_samples=int(arr.size),
+        window=window,
+        hop=hop,
+        level_db=level_out,
+        t1=t1_out,
+        basis_id=basis.id,
+        window_level_error_db=error,
     )
 
 
