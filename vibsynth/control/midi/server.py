@@ -12,11 +12,18 @@ for JACK MIDI). Nothing here names a backend.
 
 Input thread
 ------------
-The port is opened through mido, then read by polling on a thread of our own
-(for python-rtmidi: its C++ queue, so no Python code runs inside the MIDI
-backend's thread, which for JACK is the real-time process thread). The thread
-calls the mapper, which calls the :class:`Controller`, which only appends to the
-engine's command deque: the input thread never waits for the audio thread.
+The port is read by polling on a thread of our own. The thread calls the mapper,
+which calls the :class:`Controller`, which only appends to the engine's command
+deque: the input thread never waits for the audio thread.
+
+With mido's default backend (``mido.backends.rtmidi``, python-rtmidi >=
+:data:`RTMIDI_MIN_VERSION`) the port is opened through python-rtmidi's public API
+(:class:`RtMidiInput`) with the backend API mido's ``MIDO_BACKEND`` names, and
+polled with ``MidiIn.get_message()`` (its C++ queue). A port opened through mido
+would install mido's Python callback in the backend's own thread, which for JACK
+is the real-time process thread: every message would take the GIL there. With any
+other backend, or an older python-rtmidi, the port is opened through mido and
+polled with its public ``iter_pending()``.
 
 Disconnects
 -----------
@@ -32,7 +39,7 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +64,97 @@ def running_servers() -> list[MidiServer]:
 
 VIRTUAL_PORT_NAME = "vibsynth"
 POLL_S = 0.0005  # input thread sleep when the queue is empty
+#: Oldest python-rtmidi whose API :class:`RtMidiInput` uses (``get_api_name``, ``MidiIn(name=)``).
+RTMIDI_MIN_VERSION = (1, 4)
+_MIDO_RTMIDI = "mido.backends.rtmidi"
+
+
+def _version_tuple(text: str) -> tuple[int, ...]:
+    parts = []
+    for part in text.split("."):
+        digits = "".join(ch for ch in part if ch.isdigit()) if part[:1].isdigit() else ""
+        if not digits:
+            break
+        parts.append(int(digits))
+    return tuple(parts)
+
+
+def rtmidi_module() -> Any:
+    """python-rtmidi, when mido's backend is the rtmidi one and the version is supported; else None."""
+    if mido.backend.name != _MIDO_RTMIDI:
+        return None
+    try:
+        from importlib.metadata import version
+
+        import rtmidi
+    except ImportError:
+        return None
+    try:
+        installed = _version_tuple(version("python-rtmidi"))
+    except Exception:  # noqa: BLE001 - metadata missing (e.g. a vendored copy): mido's public API
+        return None
+    return rtmidi if installed >= RTMIDI_MIN_VERSION else None
+
+
+class RtMidiInput:
+    """A MIDI input opened and polled through python-rtmidi's public API (no callback).
+
+    Parameters
+    ----------
+    rtmidi : module
+        python-rtmidi (see :func:`rtmidi_module`).
+    name : str
+        Port to open (exactly as listed), or the virtual port's name.
+    virtual : bool
+        Create a virtual input (client and port both named ``name``).
+    api : str, optional
+        Backend API as mido names it (``UNIX_JACK``, ``LINUX_ALSA``, ...; ``MIDO_BACKEND``'s
+        part after the slash); None = python-rtmidi's default.
+
+    Raises
+    ------
+    OSError
+        No such port, or the backend refused to open it.
+    """
+
+    def __init__(self, rtmidi: Any, name: str, *, virtual: bool, api: str | None = None) -> None:
+        rtapi = rtmidi.API_UNSPECIFIED if api is None else getattr(rtmidi, f"API_{api}", None)
+        if rtapi is None:
+            raise OSError(f"unknown MIDI API {api!r}")
+        try:
+            self._midi = rtmidi.MidiIn(rtapi=rtapi, name=name if virtual else None)
+        except Exception as exc:  # rtmidi.SystemError: no ALSA sequencer, no JACK server
+            raise OSError(_one_line(exc)) from None
+        try:
+            if virtual:
+                self._midi.open_virtual_port(name)
+            else:
+                ports = self._midi.get_ports()
+                if name not in ports:
+                    raise OSError(f"unknown port {name!r}")
+                self._midi.open_port(ports.index(name))
+        except Exception:
+            self._midi.delete()
+            raise
+        self._midi.ignore_types(sysex=False, timing=False, active_sense=True)  # as mido does
+        self.name = name
+        self.backend = f"RtMidi/{rtmidi.get_api_name(self._midi.get_current_api())}"
+
+    def iter_pending_bytes(self) -> Iterator[list[int]]:
+        """The raw messages queued since the last call (python-rtmidi's C++ queue)."""
+        while True:
+            item = self._midi.get_message()
+            if not item:
+                return
+            yield item[0]
+
+    def port_names(self) -> list[str]:
+        """The backend's input names, listed through this client (no new backend client)."""
+        return list(self._midi.get_ports())
+
+    def close(self) -> None:
+        self._midi.close_port()
+        self._midi.delete()
 
 
 def resolve_port_name(spec: str | int, names: Sequence[str]) -> str:
@@ -100,7 +198,9 @@ class MidiServer:
     reconnect_interval_s : float
         How often a named port is checked for disconnects / reopened.
     open_input : callable, optional
-        ``(name, virtual) -> mido port``; default ``mido.open_input`` (tests inject fakes).
+        ``(name, virtual) -> port``: an :class:`RtMidiInput` or a mido input port (read with
+        ``iter_pending()``). Default: :class:`RtMidiInput` when :func:`rtmidi_module` allows
+        it, else ``mido.open_input`` (tests inject fakes).
     input_names : callable, optional
         Default ``mido.get_input_names``.
     """
@@ -138,6 +238,9 @@ class MidiServer:
     # -------------------------------------------------------------- lifecycle
     @staticmethod
     def _mido_open(name: str, virtual: bool) -> Any:
+        rtmidi = rtmidi_module()
+        if rtmidi is not None:
+            return RtMidiInput(rtmidi, name, virtual=virtual, api=mido.backend.api)
         if virtual:
             return mido.open_input(name, virtual=True, client_name=VIRTUAL_PORT_NAME)
         return mido.open_input(name)
@@ -149,10 +252,6 @@ class MidiServer:
         else:
             name = resolve_port_name(self.port_spec if self.port_spec is not None else 0, self._input_names())
             port = self._open_input(name, False)
-        rt = getattr(port, "_rt", None)
-        if rt is not None:  # python-rtmidi: poll its queue, never run Python in the backend's thread
-            port.callback = None
-            rt.cancel_callback()
         self._port, self._port_name = port, name
 
     def start(self) -> None:
@@ -207,7 +306,7 @@ class MidiServer:
         where = (
             f"virtual input {VIRTUAL_PORT_NAME!r}" if self.virtual else f"input {self._port_name or self.port_spec!r}"
         )
-        backend = getattr(self._port, "_device_type", None) or str(getattr(mido, "backend", "")).split(" (")[0]
+        backend = getattr(self._port, "backend", None) or mido.backend.name
         learn = f", learning {self.mapper.learning}" if self.mapper.learning else ""
         return f"MIDI on {where} ({backend}), mode {self.mapper.settings.mode}{learn}"
 
@@ -243,14 +342,10 @@ class MidiServer:
                 continue
             got = False
             try:
-                rt = getattr(port, "_rt", None)
-                if rt is not None:
-                    while True:
-                        item = rt.get_message()
-                        if not item:
-                            break
+                if isinstance(port, RtMidiInput):
+                    for data in port.iter_pending_bytes():
                         got = True
-                        self._feed_bytes(item[0])
+                        self._feed_bytes(data)
                 else:
                     for msg in port.iter_pending():
                         got = True
@@ -274,12 +369,11 @@ class MidiServer:
             self.mapper.handle(msg)
 
     def _list_names(self) -> list[str]:
-        # While open, list through the port's own rtmidi object: creating a new backend
-        # client (what mido.get_input_names does) while holding the GIL can deadlock
-        # against an in-process JACK audio callback.
-        rt = getattr(self._port, "_rt", None)
-        if rt is not None:
-            return list(rt.get_ports())
+        # While open, list through the port's own client: mido.get_input_names would
+        # create (and drop) a backend client, e.g. a JACK client, every check.
+        port = self._port
+        if isinstance(port, RtMidiInput):
+            return port.port_names()
         return self._input_names()
 
     def _watch_loop(self) -> None:
