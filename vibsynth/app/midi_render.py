@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,14 +38,15 @@ class MidiRender:
     ----------
     engine : Engine
         With the controller and mapper that the timeline's cues call.
-    timeline : list of Cue
+    timeline : iterator of Cue
         One cue per (non-meta) message at its frame; each calls ``mapper.handle(msg, at_frame=...)``.
+        Generated while rendering (nothing per message is stored), so it can be rendered once.
     frames : int
         Output length.
     """
 
     engine: Engine
-    timeline: list[Cue]
+    timeline: Iterator[Cue]
     frames: int
 
     @property
@@ -112,18 +113,24 @@ def prepare_midi_render(
     settings = MidiSettings.from_config(data, engine.channels)
     mapper = MidiMapper(controller, settings, presets=presets, source="midi-file")
     fs = float(engine.fs)
-    timeline: list[Cue] = []
-    t = 0.0
-    for msg in midi_file:  # iteration yields delta times in seconds (tempo applied)
-        t += float(msg.time)
-        if not msg.is_meta:
-            timeline.append(Cue(int(round(t * fs)), _handler(mapper, msg)))
     if seconds is None:
+        t = 0.0
+        for msg in midi_file:  # delta times in seconds (tempo applied), summed as the timeline does
+            t += float(msg.time)
         seconds = t + settings.release_s + 0.25
     frames = int(round(float(seconds) * fs))
     if frames <= 0:
         raise ParameterError(f"render length must be positive, got {seconds!r} s")
-    return MidiRender(engine, timeline, frames)
+    return MidiRender(engine, _timeline(midi_file, mapper, fs), frames)
+
+
+def _timeline(midi_file: mido.MidiFile, mapper: MidiMapper, fs: float) -> Iterator[Cue]:
+    """A cue per non-meta message, at the frame of its time (seconds, tempo applied), made as needed."""
+    t = 0.0
+    for msg in midi_file:  # iteration yields delta times in seconds (tempo applied)
+        t += float(msg.time)
+        if not msg.is_meta:
+            yield Cue(int(round(t * fs)), _handler(mapper, msg))
 
 
 def _handler(mapper: MidiMapper, msg: mido.Message) -> Callable[[int], object]:

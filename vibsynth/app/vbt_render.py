@@ -19,7 +19,7 @@ never fills the engine's schedule), and the samples stream into the sink.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from vibsynth.app import render as offline
 from vibsynth.app.render import DEFAULT_BLOCK, MAX_COLLECT_BYTES, ArrayCollector, Cue, RenderResult, Sink
 from vibsynth.dsp.basis import Basis
-from vibsynth.dsp.codec import Trajectory, knob_schedule
+from vibsynth.dsp.codec import KnobEvent, Trajectory, knob_schedule
 from vibsynth.engine.commands import SetKnob
 from vibsynth.engine.engine import Engine
 from vibsynth.errors import ParameterError
@@ -74,8 +74,9 @@ class VbtRender:
     ----------
     engine : Engine
         Mono, built for this trajectory's levels.
-    timeline : list of Cue
-        Two :class:`~vibsynth.engine.commands.SetKnob` cues (intensity, balance) per knob move.
+    timeline : iterator of Cue
+        Two :class:`~vibsynth.engine.commands.SetKnob` cues (intensity, balance) per knob move,
+        made while rendering (so it can be rendered once).
     frames : int
         Output length at ``fs``.
     fs, offset_db, ceiling_db, range_db, balance_clamped, n_events
@@ -83,7 +84,7 @@ class VbtRender:
     """
 
     engine: Engine
-    timeline: list[Cue]
+    timeline: Iterator[Cue]
     frames: int
     fs: float
     offset_db: float
@@ -170,14 +171,10 @@ def prepare(
     events = knob_schedule(
         trajectory, basis=basis, out_fs=fs, ceiling_db=engine.ceiling_db, range_db=engine.range_db, offset_db=offset
     )
-    timeline: list[Cue] = []
-    for ev in events:
-        timeline.append(Cue(ev.frame, SetKnob("intensity", ev.intensity, glide_s=ev.glide_s)))
-        timeline.append(Cue(ev.frame, SetKnob("balance", ev.balance, glide_s=ev.glide_s)))
     n_out = int(round(trajectory.n_samples * fs / trajectory.fs))
     return VbtRender(
         engine=engine,
-        timeline=timeline,
+        timeline=_timeline(events),
         frames=n_out,
         fs=float(fs),
         offset_db=offset,
@@ -186,6 +183,12 @@ def prepare(
         balance_clamped=clamped,
         n_events=len(events),
     )
+
+
+def _timeline(events: list[KnobEvent]) -> Iterator[Cue]:
+    for ev in events:
+        yield Cue(ev.frame, SetKnob("intensity", ev.intensity, glide_s=ev.glide_s))
+        yield Cue(ev.frame, SetKnob("balance", ev.balance, glide_s=ev.glide_s))
 
 
 def render_to(

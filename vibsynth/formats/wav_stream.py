@@ -267,8 +267,10 @@ class WavStreamWriter:
             block = block[:, np.newaxis]
         if block.ndim != 2 or block.shape[1] != self.channels:
             raise ParameterError(f"expected blocks of shape (frames, {self.channels}), got {np.shape(samples)}")
+        if block.shape[0] == 0:
+            return
         data = np.ascontiguousarray(encode_samples(block, self.sample_format))
-        self._fh.write(memoryview(data).cast("B"))
+        self._fh.write(data.data.cast("B"))
         self.frames += block.shape[0]
 
     def close(self) -> Path:
