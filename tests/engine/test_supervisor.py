@@ -301,6 +301,7 @@ def test_jack_server_death_is_reported_retried_with_backoff_and_recovered(small_
     assert out.state_reason == ""
     assert len(sd.streams) == 2 and sd.streams[1].active and sd.streams[1].lib is sd._lib
     assert out.stats.restarts == 1 and out.engine.stats.output_errors == 1
+    assert (out.supervisor.losses, out.supervisor.recoveries) == (1, 1)  # one outage, however many retries
     assert out.engine.knob_values() == knobs_before  # same engine, same knobs
     assert "audio device back: streaming again after" in caplog.text
     out.stop()

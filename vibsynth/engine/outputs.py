@@ -141,13 +141,11 @@ class OutputBackend:
 
 # ---------------------------------------------------------------------- sounddevice
 def import_sounddevice() -> ModuleType:
-    """Import python-sounddevice, turning a missing PortAudio into :class:`DeviceError`."""
+    """Import python-sounddevice (a dependency), turning a missing PortAudio into :class:`DeviceError`."""
     try:
         import sounddevice
     except OSError as exc:  # the PortAudio shared library is missing
         raise DeviceError(f"PortAudio is not available ({exc}); install libportaudio2") from None
-    except ImportError as exc:
-        raise DeviceError(f"python-sounddevice is not installed ({exc})") from None
     return sounddevice
 
 

@@ -236,8 +236,11 @@ def test_gate_note_on_velocity_curve_and_release_glide():
 
 def test_note_on_velocity_zero_is_note_off():
     mapper, ctl, engine, port = make()
-    play(mapper, port, on(60, 100), on(60, 0))
+    play(mapper, port, on(60, 100))
+    assert knob(ctl, "intensity") == pytest.approx(100 / 127)  # sounding first: the 0 below is a release
+    play(mapper, port, on(60, 0))
     assert knob(ctl, "intensity") == 0.0
+    assert knob_cmds(engine, "intensity")[-1].glide_s == pytest.approx(0.15)  # the release glide, as a note-off
 
 
 def test_stacked_notes_sound_until_last_released():
@@ -323,7 +326,9 @@ def test_default_channel_1_drives_all_actuators():
 @pytest.mark.parametrize("control", [120, 123])
 def test_all_notes_off_silences_immediately(control):
     mapper, ctl, engine, port = make()
-    play(mapper, port, on(60), on(61), cc(control, 0))
+    play(mapper, port, on(60), on(61))
+    assert knob(ctl, "intensity") == 1.0
+    play(mapper, port, cc(control, 0))
     assert knob(ctl, "intensity") == 0.0
     assert isinstance(engine.commands[-1], Panic)
     # the notes are forgotten: their late note-offs do not revive anything
@@ -342,7 +347,9 @@ def test_all_notes_off_on_a_subset_fades_only_those_channels():
 @pytest.mark.parametrize("kind", ["reset", "stop"])
 def test_reset_and_stop_silence_everything(kind):
     mapper, ctl, engine, port = make(channels=2, mode="continuous")
-    play(mapper, port, cc(11, 127), mido.Message(kind))
+    play(mapper, port, cc(11, 127))
+    assert [knob(ctl, "intensity", c) for c in range(2)] == [1.0, 1.0]
+    play(mapper, port, mido.Message(kind))
     assert [knob(ctl, "intensity", c) for c in range(2)] == [0.0, 0.0]
     assert isinstance(engine.commands[-1], Panic)
 

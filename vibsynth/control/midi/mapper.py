@@ -339,7 +339,7 @@ class MidiMapper:
         self._push(acts, ("intensity",), at_frame, None)
         return True
 
-    def _intensity_glide(self, a: int, old: float | None, new: float) -> float | None:
+    def _intensity_glide(self, a: int, new: float) -> float | None:
         # note-off to silence releases with the configured release time
         return self.settings.release_s if new == 0.0 and not self._act[a].held else self.settings.attack_s
 
@@ -565,8 +565,17 @@ class MidiMapper:
             level = note.pressure if self.settings.mpe else max(level, note.pressure)
         return _clamp(level * st.expression, 0.0, 1.0)
 
-    def _push(self, acts: tuple[int, ...], knobs: tuple[str, ...], at_frame: int | None, glide: Any) -> None:
-        """Send changed targets, one controller call per (knob, value, glide) group."""
+    def _push(
+        self,
+        acts: tuple[int, ...],
+        knobs: tuple[str, ...],
+        at_frame: int | None,
+        glide: float | None | Callable[[int, float], float | None],
+    ) -> None:
+        """Send changed targets, one controller call per (knob, value, glide) group.
+
+        ``glide`` is seconds, None (the channel's glide), or ``glide(actuator, value)``.
+        """
         for knob in knobs:
             groups: dict[tuple[float, float | None], list[int]] = {}
             for a in acts:
@@ -578,7 +587,7 @@ class MidiMapper:
                     continue  # never touched by a note: leave other sources' intensity alone
                 if st.sent.get(knob) == value:
                     continue
-                g = glide(a, st.sent.get(knob), value) if callable(glide) else glide
+                g = glide(a, value) if callable(glide) else glide
                 st.sent[knob] = value
                 groups.setdefault((value, g), []).append(a)
             for (value, g), chans in groups.items():

@@ -83,15 +83,13 @@ def rtmidi_module() -> Any:
     """python-rtmidi, when mido's backend is the rtmidi one and the version is supported; else None."""
     if mido.backend.name != _MIDO_RTMIDI:
         return None
-    try:
-        from importlib.metadata import version
+    from importlib.metadata import PackageNotFoundError, version
 
-        import rtmidi
-    except ImportError:
-        return None
+    import rtmidi  # a dependency; imported here so libjack/libasound load only when MIDI is used
+
     try:
         installed = _version_tuple(version("python-rtmidi"))
-    except Exception:  # noqa: BLE001 - metadata missing (e.g. a vendored copy): mido's public API
+    except PackageNotFoundError:  # no metadata (e.g. a vendored copy): mido's public API
         return None
     return rtmidi if installed >= RTMIDI_MIN_VERSION else None
 
@@ -232,7 +230,6 @@ class MidiServer:
         self._port_name: str | None = None
         self.disconnects = 0
         self.received = 0
-        self.last_message_at: float | None = None
         self.learned: list[Binding] = []
 
     # -------------------------------------------------------------- lifecycle
@@ -358,13 +355,11 @@ class MidiServer:
 
     def _feed_bytes(self, data: Sequence[int]) -> None:
         self.received += 1
-        self.last_message_at = time.monotonic()
         with self._lock:
             self.mapper.handle_bytes(data)
 
     def _feed(self, msg: mido.Message) -> None:
         self.received += 1
-        self.last_message_at = time.monotonic()
         with self._lock:
             self.mapper.handle(msg)
 
