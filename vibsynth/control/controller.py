@@ -28,6 +28,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
 from typing import Protocol
 
+from vibsynth.control.tap import InputTap
 from vibsynth.engine.commands import KNOB_NAMES, Command, Panic, SetGlide, SetKnob, SetMute
 from vibsynth.errors import ParameterError, PresetError
 
@@ -99,11 +100,14 @@ class KnobEvent:
 
     channel: int
     name: str
-    value: float | str | bool | None
+    value: KnobValue
     source: str
 
 
 Listener = Callable[[KnobEvent], None]
+
+#: What a knob event carries: a number (intensity, balance, glide), a flag (mute) or a preset name.
+KnobValue = float | str | bool | None
 
 #: ChannelState field -> the name subscribers see (the same names as :meth:`Controller.get`).
 _EVENT_NAMES = {"muted": "mute", "glide_s": "glide"}
@@ -167,6 +171,7 @@ class Controller:
         self._last_seq = 0
         self.started_at = time.monotonic()
         self.error_counts: dict[str, int] = {}
+        self.tap = InputTap()  # what the adapters receive, for monitors and status (control/tap.py)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -187,13 +192,13 @@ class Controller:
     def _engine_channels(self, chans: tuple[int, ...]) -> tuple[int, ...] | None:
         return None if len(chans) == self.channels else chans
 
-    def _apply(self, command: Command, chans: tuple[int, ...], field: str, value: object, source: str) -> None:
+    def _apply(self, command: Command, chans: tuple[int, ...], field: str, value: KnobValue, source: str) -> None:
         """Submit ``command`` and record ``field = value`` on ``chans`` where it is the latest-timed value.
 
         Both happen under the lock, so two threads setting the same knob leave the state
         equal to what the engine received last.
         """
-        events = []
+        events: list[KnobEvent] = []
         with self._lock:
             seq = self.engine.submit(command)
             self._last_seq = max(self._last_seq, seq)
@@ -205,14 +210,14 @@ class Controller:
         _notify(listeners, events)
 
     def _set_if_latest(
-        self, c: int, field: str, value: object, frame: int, source: str, events: list[KnobEvent]
+        self, c: int, field: str, value: KnobValue, frame: int, source: str, events: list[KnobEvent]
     ) -> None:
         """With the lock held: set ``field`` of channel ``c`` unless a later-timed value waits."""
         effective = self._effective[c]
         if frame < effective.get(field, -1):
             return
         effective[field] = frame
-        self._state[c] = replace(self._state[c], **{field: value})
+        self._state[c] = replace(self._state[c], **{field: value})  # type: ignore[arg-type]  # field names a ChannelState field
         events.append(KnobEvent(c, _EVENT_NAMES.get(field, field), value, source))
 
     def record(self, updates: Iterable[tuple[str, int, float]], seq: int, *, source: str) -> None:
@@ -225,7 +230,7 @@ class Controller:
         seq : int
             The engine sequence number of the last of them (for :meth:`sync`).
         """
-        events = []
+        events: list[KnobEvent] = []
         with self._lock:
             self._last_seq = max(self._last_seq, int(seq))
             frame = self.engine.frame_position
@@ -234,12 +239,12 @@ class Controller:
             listeners = list(self._listeners) if events else []
         _notify(listeners, events)
 
-    def _update(self, chans: tuple[int, ...], field: str, value: object, source: str) -> None:
+    def _update(self, chans: tuple[int, ...], field: str, value: KnobValue, source: str) -> None:
         """Record a state change that is not an engine command (e.g. the preset name)."""
-        events = []
+        events: list[KnobEvent] = []
         with self._lock:
             for c in chans:
-                self._state[c] = replace(self._state[c], **{field: value})
+                self._state[c] = replace(self._state[c], **{field: value})  # type: ignore[arg-type]
                 events.append(KnobEvent(c, _EVENT_NAMES.get(field, field), value, source))
             listeners = list(self._listeners)
         _notify(listeners, events)

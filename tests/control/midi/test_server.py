@@ -12,7 +12,7 @@ from vibsynth.control.controller import Controller
 from vibsynth.control.midi import server as midi_server
 from vibsynth.control.midi.bindings import MidiSettings
 from vibsynth.control.midi.mapper import MidiMapper
-from vibsynth.control.midi.server import MidiServer, RtMidiInput, rtmidi_module
+from vibsynth.control.midi.server import VIRTUAL_PORT_NAME, MidiServer, RtMidiInput, rtmidi_module
 from vibsynth.settings.config import default_config_data
 
 
@@ -186,3 +186,59 @@ def test_other_backends_are_opened_and_polled_through_mido(monkeypatch):
         server._feed(msg)
     assert controller.get("intensity") == 1.0
     assert server._list_names() == ["Keys"]
+
+
+@pytest.mark.parametrize(
+    "platform, backend, words",
+    [
+        ("linux", "", ["ALSA sequencer", "MIDO_BACKEND=mido.backends.rtmidi/UNIX_JACK", "a2jmidid"]),
+        ("linux", "mido.backends.rtmidi/UNIX_JACK", ["start jackd first"]),
+        ("darwin", "", ["IAC Driver", "--midi-virtual"]),
+        ("win32", "", ["loopMIDI"]),
+    ],
+)
+def test_port_help_names_the_way_to_ports_on_each_platform(platform, backend, words):
+    from vibsynth.control.midi.adapter import port_help
+
+    text = port_help(platform, backend)
+    assert all(w in text for w in words) and "docs/midi.md" in text and "\n" not in text
+
+
+def test_a_missing_backend_warning_says_how_to_get_ports(monkeypatch, caplog):
+    import argparse
+    import logging
+
+    import mido
+
+    from tests.control.osc.fakes import make_controller
+    from vibsynth.control.midi import adapter
+    from vibsynth.settings.config import default_config_data
+
+    def broken():
+        raise OSError("ALSA lib seq_hw.c:466:(snd_seq_hw_open) open /dev/snd/seq failed: No such file or directory")
+
+    monkeypatch.setattr(mido, "get_input_names", broken)
+    monkeypatch.setattr(adapter, "port_help", lambda: "HOW-TO-GET-PORTS")
+    args = argparse.Namespace(midi=None, midi_virtual=True, no_midi=False, learn=None, config=None)
+    with caplog.at_level(logging.WARNING):
+        server = adapter.create(argparse.Namespace(data=default_config_data()), args, make_controller(1), None)
+    assert server is None
+    (line,) = [r.getMessage() for r in caplog.records if "running without MIDI" in r.getMessage()]
+    assert "/dev/snd/seq" in line and line.endswith("HOW-TO-GET-PORTS")
+
+
+def test_midi_messages_reach_the_tap_with_channels_from_one():
+    import mido
+
+    from vibsynth.control.tap import InputTap
+
+    tap = InputTap()
+    cursor = tap.attach()
+    server, _ = make_server(virtual=True, tap=tap)
+    server._feed(mido.Message("control_change", channel=0, control=74, value=90))
+    server._feed_bytes([0x91, 60, 100])
+    events, _, _ = tap.read(cursor)
+    assert [(e.source, e.text) for e in events] == [
+        ("midi", f"control_change channel=1 control=74 value=90 time=0  (port {VIRTUAL_PORT_NAME})"),
+        ("midi", f"note_on channel=2 note=60 velocity=100 time=0  (port {VIRTUAL_PORT_NAME})"),
+    ]

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
+import sys
 from typing import Any
 
 import mido
@@ -88,13 +90,13 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
     try:
         names = mido.get_input_names()
     except Exception as exc:
-        log.warning("running without MIDI: the MIDI backend is not usable (%s)", _one_line(exc))
+        log.warning("running without MIDI: the MIDI backend is not usable (%s). %s", _one_line(exc), port_help())
         return None
-    if not virtual:
+    if port is not None and not virtual:
         try:
             resolve_port_name(port, names)
         except DeviceError as exc:
-            log.warning("running without MIDI: %s", exc)
+            log.warning("running without MIDI: %s. %s", exc, port_help())
             return None
     mapper = MidiMapper(controller, settings, presets=presets)
     server = MidiServer(
@@ -103,10 +105,36 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
         virtual=virtual,
         config_path=user_config_path(getattr(args, "config", None)),
         reconnect_interval_s=float(section.get("reconnect_interval_s", 1.0) or 1.0),
+        tap=getattr(controller, "tap", None),
     )
     if getattr(args, "learn", None):
         server.learn(args.learn)
     return server
+
+
+def port_help(platform: str | None = None, backend: str | None = None) -> str:
+    """How to get MIDI ports on this platform, in one sentence for a warning (docs/midi.md, "Ports")."""
+    platform = sys.platform if platform is None else platform
+    backend = os.environ.get("MIDO_BACKEND", "") if backend is None else backend
+    if platform.startswith("linux"):
+        if "UNIX_JACK" in backend:
+            return "With JACK MIDI, start jackd first (the ports are JACK's); see docs/midi.md"
+        return (
+            "On Linux MIDI ports come from the ALSA sequencer (/dev/snd/seq, module snd-seq); without it, "
+            "use JACK MIDI: MIDO_BACKEND=mido.backends.rtmidi/UNIX_JACK with jackd running, or bridge ALSA "
+            "devices into JACK with a2jmidid; see docs/midi.md"
+        )
+    if platform == "darwin":
+        return (
+            "On macOS, hardware ports appear in Audio MIDI Setup; for a software port enable the IAC Driver "
+            "there, or use --midi-virtual; see docs/midi.md"
+        )
+    if platform.startswith("win"):
+        return (
+            "On Windows, connect the device or create a loopback port with loopMIDI (Windows has no virtual "
+            "ports: --midi-virtual is unavailable); see docs/midi.md"
+        )
+    return "See docs/midi.md for how to get MIDI ports"
 
 
 def learn(knob: str) -> bool:

@@ -48,6 +48,7 @@ import mido
 from vibsynth.control.midi.bindings import Binding
 from vibsynth.control.midi.learn_store import save_learned_mapping
 from vibsynth.control.midi.mapper import MidiMapper
+from vibsynth.control.tap import InputTap
 from vibsynth.errors import DeviceError
 
 log = logging.getLogger(__name__)
@@ -215,8 +216,10 @@ class MidiServer:
         reconnect_interval_s: float = 1.0,
         open_input: Callable[[str, bool], Any] | None = None,
         input_names: Callable[[], list[str]] | None = None,
+        tap: InputTap | None = None,
     ) -> None:
         self.mapper = mapper
+        self.tap = tap if tap is not None else InputTap()
         self.port_spec = port
         self.virtual = virtual
         self.config_path = None if config_path is None else Path(config_path)
@@ -311,12 +314,12 @@ class MidiServer:
     def learn(self, knob: str) -> None:
         """Bind the next moved controller to ``knob`` and save it to the user config file."""
         self.mapper.learn(knob, self._learned)
-        log.warning("MIDI learn: move a controller to bind it to %s", knob)
+        log.info("MIDI learn: move a controller to bind it to %s", knob)
 
     def _learned(self, binding: Binding, bindings: tuple[Binding, ...]) -> None:
         self.learned.append(binding)
         what = f"CC {binding.cc}" if binding.cc is not None else f"NRPN {binding.nrpn}"
-        log.warning("MIDI learn: %s -> %s", what, binding.knob)
+        log.info("MIDI learn: %s -> %s", what, binding.knob)
         if self.config_path is None:
             return
         path = self.config_path
@@ -326,7 +329,7 @@ class MidiServer:
     def _save(self, path: Path, bindings: tuple[Binding, ...]) -> None:
         try:
             save_learned_mapping(path, bindings)
-            log.warning("MIDI learn: saved to %s", path)
+            log.info("MIDI learn: saved to %s", path)
         except Exception as exc:
             log.error("MIDI learn: could not save to %s: %s", path, _one_line(exc))
 
@@ -355,13 +358,25 @@ class MidiServer:
 
     def _feed_bytes(self, data: Sequence[int]) -> None:
         self.received += 1
+        if self.tap.active:
+            self.tap.publish("midi", lambda: self._describe(mido.Message.from_bytes(list(data))))
         with self._lock:
             self.mapper.handle_bytes(data)
 
     def _feed(self, msg: mido.Message) -> None:
         self.received += 1
+        if self.tap.active:
+            self.tap.publish("midi", lambda: self._describe(msg))
         with self._lock:
             self.mapper.handle(msg)
+
+    def _describe(self, msg: mido.Message) -> str:
+        """``note_on channel=1 note=60 velocity=100  (port NAME)``, MIDI channels counted from 1."""
+        text = str(msg)
+        if hasattr(msg, "channel"):
+            text = text.replace(f"channel={msg.channel}", f"channel={msg.channel + 1}", 1)
+        where = VIRTUAL_PORT_NAME if self.virtual else (self._port_name or str(self.port_spec))
+        return f"{text}  (port {where})"
 
     def _list_names(self) -> list[str]:
         # While open, list through the port's own client: mido.get_input_names would

@@ -23,7 +23,6 @@ from vibsynth.control.osc.transport import (
     UdpTransport,
 )
 from vibsynth.control.osc.workers import Notifier, PeerLike, SyncWorker
-from vibsynth.control.tap import InputTap
 from vibsynth.errors import ConfigError
 from vibsynth.settings.allow_list import resolve_allow_list
 
@@ -71,8 +70,7 @@ class OscServer:
         allow_set = resolve_allow_list(allow)
         prefix = normalize_prefix(prefix)
         self.notifier = Notifier(controller, prefix, rate_hz=notify_rate_hz)
-        existing = getattr(controller, "tap", None)
-        self.tap = existing if isinstance(existing, InputTap) else InputTap()
+        self.tap = controller.tap  # shared with the MIDI input: one stream for monitors and status
         self.monitor = MonitorWorker(self.tap, prefix)
         self.sync_worker = SyncWorker(controller, self._reply_synced, timeout_s=schedule_horizon_s + 2.0)
         self.handler = OscHandler(
