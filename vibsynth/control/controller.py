@@ -60,10 +60,17 @@ class EngineLike(Protocol):
 class PresetLike(Protocol):
     """What the controller needs of a preset (see :mod:`vibsynth.settings.presets`)."""
 
-    name: str
-    intensity: float
-    balance: float
-    glide_ms: float | None
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def intensity(self) -> float: ...
+
+    @property
+    def balance(self) -> float: ...
+
+    @property
+    def glide_ms(self) -> float | None: ...
 
 
 @dataclass(frozen=True)

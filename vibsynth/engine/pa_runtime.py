@@ -26,7 +26,6 @@ import tempfile
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 from vibsynth.engine.supervisor import HungCallError, call_with_timeout
@@ -35,6 +34,10 @@ from vibsynth.errors import DeviceError
 __all__ = ["PortAudioRuntime", "load_library_copy", "CALL_TIMEOUT_S"]
 
 log = logging.getLogger(__name__)
+
+#: The sounddevice module: this file reaches into its private library handle (``_lib``,
+#: ``_initialized``) to swap PortAudio, so it is typed loosely on purpose.
+SoundDevice = Any
 
 #: Time limit of one PortAudio call (open, start, initialise) before it is abandoned.
 CALL_TIMEOUT_S = 2.0
@@ -53,7 +56,7 @@ PA_STREAM_IS_STOPPED = -9983
 _STREAM_METHODS = {"Pa_StopStream": "stop", "Pa_AbortStream": "abort", "Pa_CloseStream": "close"}
 
 
-def _stream_call(sd: ModuleType, lib: Any, stream: Any, function: str) -> int:
+def _stream_call(sd: SoundDevice, lib: Any, stream: Any, function: str) -> int:
     """``Pa_StopStream``/``Pa_AbortStream``/``Pa_CloseStream`` on ``stream`` through ``lib``; the error code.
 
     A sounddevice stream (it has ``_ptr``) is called through the library it was opened
@@ -70,7 +73,7 @@ def _stream_call(sd: ModuleType, lib: Any, stream: Any, function: str) -> int:
     return 0
 
 
-def _loaded_library_path(sd: ModuleType) -> str:
+def _loaded_library_path(sd: SoundDevice) -> str:
     """The file of the PortAudio library sounddevice loaded first (Linux: from /proc/self/maps)."""
     name = str(getattr(sd, "_libname", ""))
     if os.path.isabs(name) and os.path.exists(name):
@@ -87,7 +90,7 @@ def _loaded_library_path(sd: ModuleType) -> str:
     raise DeviceError("cannot find the PortAudio library file to load a fresh copy (needs Linux /proc)")
 
 
-def load_library_copy(sd: ModuleType) -> Any:
+def load_library_copy(sd: SoundDevice) -> Any:
     """Load a private copy of the PortAudio library (fresh global state) with sounddevice's FFI.
 
     The copy is unlinked right after loading (the mapping stays valid).
@@ -177,9 +180,9 @@ class PortAudioRuntime:
 
     def __init__(
         self,
-        sd: ModuleType,
+        sd: SoundDevice,
         *,
-        fresh_library: Callable[[ModuleType], Any] | None = None,
+        fresh_library: Callable[[SoundDevice], Any] | None = None,
         call_timeout_s: float = CALL_TIMEOUT_S,
         close_timeout_s: float = CLOSE_TIMEOUT_S,
     ) -> None:

@@ -27,7 +27,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, Protocol, TypeVar
+from typing import Any, Protocol, TypeVar, cast
 
 from vibsynth.errors import DeviceError
 
@@ -129,7 +129,7 @@ def call_with_timeout(fn: Callable[[], T], timeout_s: float, what: str) -> T:
             raise HungCallError(f"{what} did not return within {timeout_s:g} s (abandoned)")
     if error:
         raise error[0]
-    return result[0]
+    return cast(T, result[0])
 
 
 class Backoff:

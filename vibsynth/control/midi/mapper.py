@@ -79,8 +79,11 @@ from vibsynth.errors import ParameterError, PresetError
 class ControllerLike(Protocol):
     """What the mapper needs of :class:`~vibsynth.control.controller.Controller`."""
 
-    limits: Any
-    channels: int
+    @property
+    def limits(self) -> Any: ...
+
+    @property
+    def channels(self) -> int: ...
 
     def set_knob(
         self,
