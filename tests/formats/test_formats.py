@@ -26,8 +26,49 @@ def test_wav_formats_are_scaled_to_unit_full_scale(tmp_path, dtype, scale):
 def test_multichannel_wav_channel_choice(tmp_path):
     wavfile.write(tmp_path / "s.wav", 8000, np.array([[0.1, 0.2], [0.3, 0.4]], dtype=np.float32))
     assert np.allclose(read_recording(tmp_path / "s.wav", channel=1).samples, [0.2, 0.4])
-    with pytest.raises(InputError, match="channel 2 does not exist"):
+    with pytest.raises(InputError, match=r"has 2 channels; channel 3 \(index 2\) does not exist"):
         read_recording(tmp_path / "s.wav", channel=2)
+
+
+def _raw_wav(bits: int, data: bytes, *, channels: int = 1, fs: int = 8000, block_align: int | None = None) -> bytes:
+    """A PCM WAV file with exactly the header fields given (for files other programs write)."""
+    import struct
+
+    container = (bits + 7) // 8
+    align = block_align if block_align is not None else container * channels
+    fmt = struct.pack("<HHIIHH", 1, channels, fs, fs * align, align, bits)
+    body = b"WAVEfmt " + struct.pack("<I", len(fmt)) + fmt + b"data" + struct.pack("<I", len(data)) + data
+    return b"RIFF" + struct.pack("<I", len(body)) + body
+
+
+@pytest.mark.parametrize(
+    "bits, low, high, block_align",
+    [
+        (8, 0, 255, None),  # full-scale 8-bit
+        (7, 0, 254, None),  # 7 bits, left-justified in the 8-bit container as WAV defines
+        (16, 0, 255, 1),  # a header that claims 16 bits in 1-byte frames: the container is still unsigned
+    ],
+)
+def test_8_bit_wav_is_unsigned_centred_at_128(tmp_path, bits, low, high, block_align):
+    square = np.where(np.arange(800) % 80 < 40, high, low).astype(np.uint8)
+    path = tmp_path / "square.wav"
+    path.write_bytes(_raw_wav(bits, square.tobytes(), block_align=block_align))
+    x = read_recording(path).samples
+    assert x.min() == -1.0 and x.max() == (high - 128) / 128  # [0, 255] -> [-1, 127/128]
+    assert np.count_nonzero(x == -1.0) == 400 and abs(x.mean() - (high - 128 - 128) / 256) < 1e-12
+    # the same square as int16 (the reference scaling) reads the same within one 8-bit step
+    ref = np.where(square == high, (high - 128) * 256, -32768).astype(np.int16)
+    wavfile.write(tmp_path / "ref.wav", 8000, ref)
+    np.testing.assert_allclose(x, read_recording(tmp_path / "ref.wav").samples, atol=1e-12)
+
+
+def test_zero_channel_and_zero_frame_size_wav_are_one_clear_error(tmp_path):
+    (tmp_path / "c0.wav").write_bytes(_raw_wav(16, b"\x00\x01" * 100, channels=0))
+    with pytest.raises(InputError, match=r"c0.wav: not a readable WAV file \(its header says 0 channels\)"):
+        read_recording(tmp_path / "c0.wav")
+    (tmp_path / "a0.wav").write_bytes(_raw_wav(16, b"\x00\x01" * 100, channels=2, block_align=0))
+    with pytest.raises(InputError, match="a0.wav: not a readable WAV file .*0 bytes per frame for 2 channels"):
+        read_recording(tmp_path / "a0.wav")
 
 
 def test_text_recording_with_header_and_comments(tmp_path):
@@ -231,6 +272,84 @@ def test_new_file_mode_follows_the_umask_and_replaced_file_keeps_its_mode(tmp_pa
         "a.txt",
         "b.txt",
     ]
+
+
+def _every_writer(tmp_path: Path, name: str) -> Path:
+    """Write one file of kind ``name`` with vibsynth's own writer; returns its path."""
+    from vibsynth.formats.basis_file import default_basis
+
+    if name == "wav":
+        write_wav(tmp_path / "w.wav", np.zeros(100), 8000.0)
+        return tmp_path / "w.wav"
+    if name == "wav stream":
+        from vibsynth.formats.wav_stream import WavStreamWriter
+
+        with WavStreamWriter(tmp_path / "s.wav", 8000.0, 1) as w:
+            w.write(np.zeros(100))
+            w.close()
+        return tmp_path / "s.wav"
+    if name == "basis":
+        save_basis(default_basis(), tmp_path / "b.yaml")
+        return tmp_path / "b.yaml"
+    if name == "preset":
+        from vibsynth.settings.presets import Preset, save_preset
+
+        return save_preset(Preset(name="mode-test", intensity=0.5, balance=0.0), tmp_path / "mode-test.yaml")
+    if name == "plot":
+        pytest.importorskip("matplotlib", reason="plots need matplotlib (vibsynth[research])")
+        from vibsynth.research.plots import plot_basis
+
+        return plot_basis(default_basis(), tmp_path / "p.png")
+    if name == "vbt":
+        from vibsynth.dsp.codec import Quantizer, encode_trajectory
+        from vibsynth.dsp.synthesis import synthesize
+        from vibsynth.formats.vbt import write_vbt
+
+        basis = default_basis()
+        x = synthesize(basis.mean_db, fs=2800.0, n_samples=8400, level_db=-40.0, rng=np.random.default_rng(1)).signal
+        traj = encode_trajectory(x, fs=2800.0, basis=basis)
+        write_vbt(tmp_path / "t.vbt", traj, Quantizer.fit(traj))
+        return tmp_path / "t.vbt"
+    raise AssertionError(name)
+
+
+@pytest.mark.parametrize("name", ["wav", "wav stream", "basis", "preset", "plot", "vbt"])
+def test_every_writer_creates_files_by_the_umask(tmp_path, name):
+    """Every file vibsynth writes is 0666 minus the umask (0644 usually), never a temporary file's 0600."""
+    import os
+    import stat
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    old = os.umask(0o022)
+    try:
+        path = _every_writer(tmp_path / "a", name)
+        assert stat.S_IMODE(path.stat().st_mode) == 0o644 and path.stat().st_size > 0
+        os.umask(0o027)
+        path = _every_writer(tmp_path / "b", name)
+        assert stat.S_IMODE(path.stat().st_mode) == 0o640
+        os.chmod(path, 0o600)  # a replaced file keeps its mode
+        os.umask(0o022)
+        assert stat.S_IMODE(_every_writer(tmp_path / "b", name).stat().st_mode) == 0o600
+    finally:
+        os.umask(old)
+    assert not [p for p in tmp_path.rglob(".*") if p.name.endswith(".tmp")]
+
+
+def test_check_writable_and_check_target_refuse_a_read_only_folder(tmp_path):
+    from tests.formats.readonly import read_only_folder
+    from vibsynth.formats.files import check_writable
+    from vibsynth.formats.wav_stream import check_target
+
+    check_writable(tmp_path)
+    assert check_target(tmp_path / "x.wav", writable=True) == tmp_path / "x.wav"
+    assert list(tmp_path.iterdir()) == []  # the probe left nothing
+    with read_only_folder(tmp_path / "ro") as ro:
+        check_target(ro / "x.wav")  # without writable=True only the folder's existence is checked
+        with pytest.raises(OSError) as info:
+            check_target(ro / "x.wav", writable=True)
+        assert info.value.filename == str(ro) and info.value.strerror
+        assert list(ro.iterdir()) == []
 
 
 def test_atomic_write_fsyncs_file_and_folder_and_writes_through_links(tmp_path, monkeypatch):

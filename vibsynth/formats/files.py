@@ -5,6 +5,11 @@
   WAV renders, bases, plots, ``.vbt`` files): a temporary file in the same folder, flush +
   fsync, ``os.replace``, fsync of the folder. A crash leaves the old file or the new one,
   never part of one. New files get mode 0644 (the umask is respected).
+
+The building blocks of that writer are public, one job each, for the other writer that
+streams (:class:`vibsynth.formats.wav_stream.WavStreamWriter`): :func:`resolve_target`,
+:func:`kept_mode`, :func:`create_temp_file`, :func:`remove_quietly`, :func:`fsync_folder`,
+and :func:`check_writable` for commands that should refuse an unwritable folder up front.
 """
 
 from __future__ import annotations
@@ -28,12 +33,32 @@ WriteData = bytes | bytearray | memoryview | str | Callable[[BinaryIO], object]
 _TEMP_ATTEMPTS = 100
 
 
-def _temp_file(folder: Path, name: str) -> tuple[int, Path]:
-    """Create ``.<name>.<random>.tmp`` in ``folder``: hidden, and not ending in the target's suffix,
-    so folder listings (the preset library) never take it for a file of theirs.
+def create_temp_file(folder: Path, name: str) -> tuple[int, Path]:
+    """Create a new, empty, hidden temporary file for ``name`` in ``folder``.
 
-    Mode 0o666 is requested and the kernel applies the umask (0644 under the usual 022),
+    The file is ``.<name>.<random>.tmp``: hidden, and not ending in the target's suffix,
+    so folder listings (the preset library) never take it for a file of theirs. Mode
+    0o666 is requested and the kernel applies the umask (0644 under the usual 022),
     unlike :func:`tempfile.mkstemp`, which always creates 0600.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        Where the target will be (a rename is atomic only within one file system).
+    name : str
+        The target's file name.
+
+    Returns
+    -------
+    fd : int
+        Open for writing (``O_EXCL``, close-on-exec); the caller closes it.
+    path : pathlib.Path
+        The temporary file; the caller renames it over the target or removes it.
+
+    Raises
+    ------
+    OSError
+        The folder is missing or not writable; ``FileExistsError`` when 100 random names were taken.
     """
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
     for _ in range(_TEMP_ATTEMPTS):
@@ -45,8 +70,13 @@ def _temp_file(folder: Path, name: str) -> tuple[int, Path]:
     raise FileExistsError(errno.EEXIST, f"no free temporary file name after {_TEMP_ATTEMPTS} tries", str(folder))
 
 
-def _fsync_folder(folder: Path) -> None:
-    """Make a rename in ``folder`` durable (POSIX; a no-op where folders cannot be opened)."""
+def fsync_folder(folder: Path) -> None:
+    """Make a rename in ``folder`` durable (POSIX; a no-op where folders cannot be opened or fsynced).
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+    """
     if not hasattr(os, "O_DIRECTORY"):
         return
     try:
@@ -59,6 +89,80 @@ def _fsync_folder(folder: Path) -> None:
         pass
     finally:
         os.close(fd)
+
+
+def remove_quietly(path: Path | None) -> None:
+    """Remove a (temporary) file if it is there; ``None`` and every ``OSError`` are ignored.
+
+    Parameters
+    ----------
+    path : pathlib.Path or None
+    """
+    if path is not None:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+
+
+def resolve_target(path: str | os.PathLike[str]) -> Path:
+    """The file a writer replaces: ``~`` expanded, a symbolic link followed to the file it points to.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    target : pathlib.Path
+    """
+    target = Path(path).expanduser()
+    if target.is_symlink():
+        target = Path(os.path.realpath(target))
+    return target
+
+
+def kept_mode(target: Path) -> int | None:
+    """The permission bits a replacement of ``target`` keeps: its current mode, or None for a new file.
+
+    A new file gets 0666 minus the umask (see :func:`create_temp_file`); a replaced
+    file keeps its mode (a config someone made 0600 stays 0600).
+
+    Parameters
+    ----------
+    target : pathlib.Path
+
+    Returns
+    -------
+    mode : int or None
+    """
+    try:
+        return stat.S_IMODE(os.stat(target).st_mode)
+    except FileNotFoundError:
+        return None
+
+
+def check_writable(folder: Path) -> None:
+    """Prove that a file can be created in ``folder`` (created and removed at once).
+
+    For commands that work a long time before they write (a long render, ``serve -o``):
+    they refuse at the start instead of failing at the end.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+
+    Raises
+    ------
+    OSError
+        The file cannot be created (read-only or missing folder, no permission); ``filename`` is the folder.
+    """
+    try:
+        fd, tmp = create_temp_file(folder, "write-check")
+    except OSError as exc:
+        raise type(exc)(exc.errno, exc.strerror or str(exc), str(folder)) from None
+    os.close(fd)
+    remove_quietly(tmp)
 
 
 def atomic_write(path: str | os.PathLike[str], data: WriteData) -> Path:
@@ -95,18 +199,13 @@ def atomic_write(path: str | os.PathLike[str], data: WriteData) -> Path:
     A new file gets mode 0666 minus the umask (0644 usually), like any file a program
     creates; a replaced file keeps its mode (a config someone made 0600 stays 0600).
     """
-    target = Path(path).expanduser()
-    if target.is_symlink():
-        target = Path(os.path.realpath(target))
+    target = resolve_target(path)
     folder = target.parent
     tmp: Path | None = None
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        try:
-            mode: int | None = stat.S_IMODE(os.stat(target).st_mode)
-        except FileNotFoundError:
-            mode = None
-        fd, tmp = _temp_file(folder, target.name)
+        mode = kept_mode(target)
+        fd, tmp = create_temp_file(folder, target.name)
         with os.fdopen(fd, "wb") as handle:
             if callable(data):
                 data(handle)
@@ -119,21 +218,13 @@ def atomic_write(path: str | os.PathLike[str], data: WriteData) -> Path:
         os.replace(tmp, target)
         tmp = None
     except OSError as exc:
-        _remove_quietly(tmp)
+        remove_quietly(tmp)
         raise type(exc)(exc.errno, exc.strerror or str(exc), str(target)) from None  # name the target, not the temp
     except BaseException:  # a failing writer, KeyboardInterrupt: no temporary file left behind
-        _remove_quietly(tmp)
+        remove_quietly(tmp)
         raise
-    _fsync_folder(folder)
+    fsync_folder(folder)
     return target
-
-
-def _remove_quietly(tmp: Path | None) -> None:
-    if tmp is not None:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:

@@ -32,7 +32,8 @@ class Recording:
     Attributes
     ----------
     samples : ndarray, shape (n_samples,)
-        float64; integer WAV data is scaled to [-1, 1).
+        float64; integer WAV data is scaled to [-1, 1) (8-bit and narrower: unsigned,
+        centred at 128).
     fs : float
         Sample rate in Hz.
     path : pathlib.Path
@@ -44,29 +45,82 @@ class Recording:
 
 
 def _scale_wav(data: NDArray[Any]) -> NDArray[np.float64]:
-    if data.dtype == np.uint8:
-        return (data.astype(np.float64) - 128.0) / 128.0
+    """Samples as float64 in [-1, 1): float data as it is, integers by their container's full scale.
+
+    A 1-byte container holds *unsigned* PCM centred at 128, whatever its bit depth (1..8
+    bits, left-justified, as the WAV format defines): [0, 255] maps to [-1, 127/128].
+    Wider containers are signed: divided by 2**(bits of the container - 1).
+    """
+    if data.dtype.itemsize == 1 and np.issubdtype(data.dtype, np.integer):
+        return (data.view(np.uint8).astype(np.float64) - 128.0) / 128.0
     if np.issubdtype(data.dtype, np.integer):
         return data.astype(np.float64) / float(-np.iinfo(data.dtype).min)
     return data.astype(np.float64)
 
 
+#: Chunks scanned for the ``fmt `` chunk before giving up (real files have it first or second).
+_MAX_HEADER_CHUNKS = 64
+
+
+def _wav_layout(path: Path) -> tuple[int, int, int] | None:
+    """(channels, block_align, bits per sample) from a WAV's ``fmt `` chunk; None when not found.
+
+    Only what :func:`_read_wav` checks before handing the file to scipy, which reads
+    everything else (and refuses what it cannot read).
+    """
+    import struct
+
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(12)
+            if len(head) < 12 or head[:4] not in (b"RIFF", b"RIFX", b"RF64") or head[8:12] != b"WAVE":
+                return None
+            order = ">" if head[:4] == b"RIFX" else "<"
+            for _ in range(_MAX_HEADER_CHUNKS):
+                chunk = handle.read(8)
+                if len(chunk) < 8:
+                    return None
+                size = struct.unpack(order + "I", chunk[4:])[0]
+                if chunk[:4] == b"fmt ":
+                    fmt = handle.read(16)
+                    if len(fmt) < 16:
+                        return None
+                    _tag, channels, _fs, _rate, block_align, bits = struct.unpack(order + "HHIIHH", fmt)
+                    return int(channels), int(block_align), int(bits)
+                handle.seek(size + (size & 1), 1)
+    except OSError:
+        return None
+    return None
+
+
 def _read_wav(path: Path, channel: int) -> tuple[NDArray[np.float64], float]:
     from scipy.io import wavfile
 
+    layout = _wav_layout(path)
+    if layout is not None:
+        channels, block_align, bits = layout
+        if channels == 0:
+            raise InputError(f"{path}: not a readable WAV file (its header says 0 channels)")
+        if bits == 0 or block_align < channels:
+            raise InputError(
+                f"{path}: not a readable WAV file (its header says {bits} bits per sample, "
+                f"{block_align} bytes per frame for {channels} channels)"
+            )
     try:
         with warnings.catch_warnings():  # unknown chunks (e.g. LIST metadata) are harmless
             warnings.simplefilter("ignore", wavfile.WavFileWarning)
             fs, data = wavfile.read(path)
-    except (ValueError, EOFError, OSError, IndexError, TypeError) as exc:
+    except (ValueError, EOFError, OSError, IndexError, TypeError, ZeroDivisionError, MemoryError) as exc:
         raise InputError(f"{path}: not a readable WAV file ({exc})") from None
     samples = _scale_wav(np.asarray(data))
     if samples.ndim == 2:
         if not (0 <= channel < samples.shape[1]):
-            raise InputError(f"{path}: has {samples.shape[1]} channels, channel {channel} does not exist")
+            raise InputError(
+                f"{path}: has {samples.shape[1]} channels; channel {channel + 1} (index {channel}) does not exist"
+            )
         samples = samples[:, channel]
     elif channel != 0:
-        raise InputError(f"{path}: is mono, channel {channel} does not exist")
+        raise InputError(f"{path}: is mono; channel {channel + 1} (index {channel}) does not exist")
     return samples, float(fs)
 
 

@@ -21,7 +21,6 @@ import errno
 import os
 import secrets
 import shutil
-import stat
 import struct
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -30,7 +29,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vibsynth.errors import ParameterError
-from vibsynth.formats.files import _fsync_folder, _remove_quietly, _temp_file
+from vibsynth.formats.files import (
+    check_writable,
+    create_temp_file,
+    fsync_folder,
+    kept_mode,
+    remove_quietly,
+    resolve_target,
+)
 
 __all__ = ["WavStreamWriter", "SAMPLE_FORMATS", "encode_samples", "check_target"]
 
@@ -68,7 +74,7 @@ def encode_samples(samples: NDArray[Any], sample_format: str) -> NDArray[Any]:
     raise ParameterError(f"unknown sample format {sample_format!r}; use float32 or pcm16")
 
 
-def check_target(path: str | os.PathLike[str], *, make_folder: bool = False) -> Path:
+def check_target(path: str | os.PathLike[str], *, make_folder: bool = False, writable: bool = False) -> Path:
     """Refuse an output path before any work: its folder must exist and it must not be a folder.
 
     Parameters
@@ -76,6 +82,10 @@ def check_target(path: str | os.PathLike[str], *, make_folder: bool = False) -> 
     path : path-like
     make_folder : bool
         A missing folder is fine (it will be created).
+    writable : bool
+        Also prove that a file can be created in the folder
+        (:func:`~vibsynth.formats.files.check_writable`): a read-only folder is refused
+        before a long render instead of after it.
 
     Returns
     -------
@@ -88,14 +98,18 @@ def check_target(path: str | os.PathLike[str], *, make_folder: bool = False) -> 
         The folder does not exist; ``filename`` is the folder, ``strerror`` "folder does not exist".
     IsADirectoryError
         ``path`` is a folder.
+    OSError
+        With ``writable``: no file can be created in the folder (``filename`` is the folder).
     """
-    target = Path(path).expanduser()
-    if target.is_symlink():
-        target = Path(os.path.realpath(target))
+    target = resolve_target(path)
     if target.is_dir():
         raise IsADirectoryError(errno.EISDIR, "is a folder, expected a file name", str(target))
-    if not make_folder and not target.parent.is_dir():
-        raise FileNotFoundError(errno.ENOENT, "folder does not exist", str(target.parent))
+    folder = target.parent
+    if not folder.is_dir():
+        if not make_folder:
+            raise FileNotFoundError(errno.ENOENT, "folder does not exist", str(folder))
+    elif writable:
+        check_writable(folder)
     return target
 
 
@@ -130,7 +144,7 @@ def _name_anonymous(fd: int, folder: Path, name: str) -> Path:
             return tmp
     finally:
         os.close(dir_fd)
-    out_fd, tmp = _temp_file(folder, name)
+    out_fd, tmp = create_temp_file(folder, name)
     try:
         with os.fdopen(out_fd, "wb") as out, os.fdopen(os.dup(fd), "rb") as src:
             src.seek(0)
@@ -138,7 +152,7 @@ def _name_anonymous(fd: int, folder: Path, name: str) -> Path:
             out.flush()
             os.fsync(out.fileno())
     except BaseException:
-        _remove_quietly(tmp)
+        remove_quietly(tmp)
         raise
     return tmp
 
@@ -212,15 +226,12 @@ class WavStreamWriter:
         self._frame_bytes = self._dtype.itemsize * self.channels
         self._is_float = tag == 3
         self._header, self._rf64, self._fact_at, self._data_size_at = self._build_header(tag, frames)
-        try:
-            self._mode: int | None = stat.S_IMODE(os.stat(target).st_mode)
-        except FileNotFoundError:
-            self._mode = None
+        self._mode = kept_mode(target)
         self._tmp: Path | None = None
         fd = _open_anonymous(folder) if anonymous else None
         self._anonymous = fd is not None
         if fd is None:
-            fd, self._tmp = _temp_file(folder, target.name)
+            fd, self._tmp = create_temp_file(folder, target.name)
         self._fh: BinaryIO | None = None
         try:
             self._fh = os.fdopen(fd, "wb", buffering=_WRITE_BUFFER)
@@ -259,6 +270,12 @@ class WavStreamWriter:
         ----------
         samples : ndarray, shape (n_frames,) or (n_frames, channels)
             Float samples; converted like :func:`~vibsynth.formats.recordings.write_wav`.
+
+        Raises
+        ------
+        OSError
+            The write failed (disk full, file size limit); ``filename`` is the target.
+            The writer stays open: :meth:`abort` it.
         """
         if self._fh is None:
             raise ValueError("the WAV writer is closed")
@@ -270,7 +287,10 @@ class WavStreamWriter:
         if block.shape[0] == 0:
             return
         data = np.ascontiguousarray(encode_samples(block, self.sample_format))
-        self._fh.write(data.data.cast("B"))
+        try:
+            self._fh.write(data.data.cast("B"))
+        except OSError as exc:  # disk full, file too large: name the target, not the temporary file
+            raise type(exc)(exc.errno, exc.strerror or str(exc), str(self.path)) from None
         self.frames += block.shape[0]
 
     def close(self) -> Path:
@@ -293,7 +313,7 @@ class WavStreamWriter:
         except BaseException:
             self._discard()
             raise
-        _fsync_folder(self.path.parent)
+        fsync_folder(self.path.parent)
         return self.path
 
     def _finish(self) -> None:
@@ -337,7 +357,7 @@ class WavStreamWriter:
                 fh.close()
             except OSError:
                 pass
-        _remove_quietly(self._tmp)
+        remove_quietly(self._tmp)
         self._tmp = None
 
     @property
