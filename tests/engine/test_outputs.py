@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import sys
 import types
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -94,6 +95,95 @@ def test_wav_output_renders_the_duration(tmp_path, small_bank):
     np.testing.assert_array_equal(data, ref)
     with pytest.raises(ParameterError):
         WavOutput(e, path, seconds=0)
+
+
+def test_wav_output_streams_with_flat_memory(tmp_path, small_bank):
+    """240 s of 2 channels at 16 kHz (31 MB of samples): Python allocates one block and the file buffer."""
+    import tracemalloc
+
+    e = Engine(small_bank, initial_intensity=0.5, channels=2)
+    path = tmp_path / "long.wav"
+    tracemalloc.start()
+    try:
+        out = WavOutput(e, path, seconds=240.0, block_size=1024)
+        out.start()
+        assert out.written.wait(60)
+        out.stop()
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    frames = 240 * int(small_bank.fs)
+    assert peak < 4 << 20, peak  # the file's 1 MiB write buffer and a block; the whole output is 31 MB
+    fs, data = wavfile.read(path, mmap=True)
+    assert fs == int(small_bank.fs) and data.shape == (frames, 2)
+    ref = Engine(small_bank, initial_intensity=0.5, channels=2).render(frames)
+    np.testing.assert_array_equal(data, ref)
+
+
+def test_wav_output_refuses_an_unwritable_file_before_rendering(tmp_path, small_bank):
+    from tests.formats.readonly import read_only_folder
+
+    e = Engine(small_bank, channels=1)
+    with pytest.raises(FileNotFoundError) as info:
+        WavOutput(e, tmp_path / "missing" / "x.wav", seconds=0.1)
+    assert info.value.filename == str(tmp_path / "missing")
+    with pytest.raises(IsADirectoryError):
+        WavOutput(e, tmp_path, seconds=0.1)
+    with read_only_folder(tmp_path / "ro") as ro, pytest.raises(OSError) as info:
+        WavOutput(e, ro / "x.wav", seconds=0.1)
+    assert str(ro) in str(info.value)
+    assert e.stats.callbacks == 0 and not list((tmp_path / "ro").iterdir())
+
+
+def test_wav_output_stopped_before_start_writes_nothing(tmp_path, small_bank):
+    out = WavOutput(Engine(small_bank, channels=1), tmp_path / "x.wav", seconds=0.1)
+    out.stop()
+    assert out.written.is_set() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("anonymous", [True, False])
+def test_wav_output_stopped_early_keeps_what_was_rendered(tmp_path, small_bank, anonymous):
+    e = Engine(small_bank, initial_intensity=0.5, channels=1)
+    out = WavOutput(e, tmp_path / "x.wav", seconds=0.5, block_size=256)
+    if not anonymous:  # the named temporary file path (systems without O_TMPFILE)
+        from vibsynth.formats.wav_stream import WavStreamWriter
+
+        out._writer.abort()
+        out._writer = WavStreamWriter(tmp_path / "x.wav", e.fs, 1, frames=out.frames, anonymous=False)
+    out._stop.set()  # stop requested before the first block: an empty but valid file
+    out.start()
+    out.stop()
+    fs, data = wavfile.read(tmp_path / "x.wav")
+    assert data.shape == (0,) and [p.name for p in tmp_path.iterdir()] == ["x.wav"]
+
+
+def _failing_wav_output(tmp_path, small_bank, how: str) -> tuple[WavOutput, Path]:
+    folder = tmp_path / "out"
+    folder.mkdir()
+    target = folder / "x.wav"
+    out = WavOutput(Engine(small_bank, initial_intensity=0.5, channels=1), target, seconds=0.5, block_size=256)
+    if how == "folder removed":  # the anonymous temporary file is not in the folder: it can go
+        folder.rmdir()
+    else:  # a folder where the file should go: the final rename fails
+        (target / "keep").mkdir(parents=True)
+    return out, target
+
+
+@pytest.mark.parametrize("how", ["folder removed", "target became a folder"])
+def test_wav_output_write_failure_is_kept_and_raised_by_stop(tmp_path, small_bank, how):
+    out, target = _failing_wav_output(tmp_path, small_bank, how)
+    out.start()
+    assert out.written.wait(10)
+    assert isinstance(out.error, OSError)
+    with pytest.raises(OSError) as info:
+        out.stop()
+    assert info.value.filename == str(target) or info.value.filename == str(target.parent)
+    out.stop()  # raised once
+    if how == "folder removed":
+        assert not target.parent.exists()
+    else:
+        assert [p.name for p in target.iterdir()] == ["keep"]
+        assert [p.name for p in target.parent.iterdir()] == ["x.wav"]  # no temporary file left
 
 
 def fake_sd(devices, apis=None, default_out=-1):
@@ -197,6 +287,71 @@ def test_serve_cli_exit_codes(no_portaudio, tmp_path, capsys):
     assert "make it vibrate" in capsys.readouterr().out
     assert main(["serve", "--config", str(config), "--seconds", "0.1", "--balance", "9", *flags]) == 2
     assert "balance" in capsys.readouterr().err
+
+
+def _serve_wav(tmp_path, target, *extra: str) -> list[str]:
+    config = tmp_path / "config.yaml"
+    config.write_text(
+        f"audio:\n  rate: 8000\nbank:\n  cache_dir: {tmp_path / 'cache'}\n  loop_seconds: 0.5\n  levels: 5\n"
+    )
+    flags = ["--no-osc"] if _has_osc() else []
+    return ["serve", "--config", str(config), "--output", "wav", "-o", str(target), *flags, *extra]
+
+
+def test_serve_wav_output_refuses_an_unwritable_file_at_start(no_portaudio, tmp_path, capsys):
+    from tests.formats.readonly import read_only_folder
+    from vibsynth.cli import main
+
+    missing = tmp_path / "missing"
+    assert main(_serve_wav(tmp_path, missing / "x.wav", "--seconds", "0.2")) == 1
+    out, err = capsys.readouterr()
+    assert err == f"vibsynth: error: {missing}: folder does not exist\n" and "serving" not in out
+    assert not (tmp_path / "cache").exists()  # refused before the bank was built
+    assert main(_serve_wav(tmp_path, tmp_path, "--seconds", "0.2")) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"vibsynth: error: {tmp_path}: ") and "is a folder" in err and err.count("\n") == 1
+    with read_only_folder(tmp_path / "ro") as ro:
+        assert main(_serve_wav(tmp_path, ro / "x.wav", "--seconds", "0.2")) == 1
+        err = capsys.readouterr().err
+        assert err.startswith(f"vibsynth: error: {ro}: ") and err.count("\n") == 1, err
+        assert not list(ro.iterdir())
+    assert main(_serve_wav(tmp_path, tmp_path / "x.wav")) == 2  # no --seconds: a bad argument
+    assert capsys.readouterr().err == "vibsynth: error: the wav output needs a duration: --seconds N\n"
+    assert not (tmp_path / "cache").exists() and not (tmp_path / "x.wav").exists()
+
+
+@pytest.mark.parametrize("how", ["folder removed", "target became a folder"])
+def test_serve_wav_output_write_failure_exits_1(no_portaudio, tmp_path, capsys, monkeypatch, how):
+    from vibsynth.cli import main
+
+    folder = tmp_path / "out"
+    folder.mkdir()
+    target = folder / "x.wav"
+    start = WavOutput.start
+
+    def start_then_break(self):  # the file system changes under the running service
+        if how == "folder removed":
+            folder.rmdir()
+        else:
+            (target / "keep").mkdir(parents=True)
+        start(self)
+
+    monkeypatch.setattr(WavOutput, "start", start_then_break)
+    assert main(_serve_wav(tmp_path, target, "--seconds", "5", "--intensity", "0.5")) == 1
+    out, err = capsys.readouterr()
+    assert "serving 1 channel(s) on wav file" in out
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("vibsynth: error: ") and str(folder) in lines[0], err
+    if how == "target became a folder":
+        assert [p.name for p in folder.iterdir()] == ["x.wav"] and [p.name for p in target.iterdir()] == ["keep"]
+
+
+def test_serve_wav_output_writes_the_file(no_portaudio, tmp_path, capsys):
+    from vibsynth.cli import main
+
+    assert main(_serve_wav(tmp_path, tmp_path / "x.wav", "--seconds", "0.5", "--intensity", "0.5")) == 0
+    fs, data = wavfile.read(tmp_path / "x.wav")
+    assert fs == 8000 and data.shape == (4000,) and np.abs(data).max() > 0
 
 
 def _has_osc() -> bool:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -96,5 +97,25 @@ def _config(args: argparse.Namespace) -> Any:
 def run(args: argparse.Namespace) -> int:
     from vibsynth.app.service import serve
 
-    # The CLI owns the process: SIGTERM/SIGINT exit (code 0) on time even if a device hangs.
-    return serve(_config(args), args, owns_process=True)
+    config = _config(args)
+    try:
+        if (config.data.get("audio") or {}).get("backend") == "wav":
+            _check_wav_output(args)
+        # The CLI owns the process: SIGTERM/SIGINT exit (code 0) on time even if a device hangs.
+        return serve(config, args, owns_process=True)
+    except OSError as exc:  # the wav output's file: refused at the start, or failed while writing
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        print(f"vibsynth: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 1
+
+
+def _check_wav_output(args: argparse.Namespace) -> None:
+    """Refuse a wav output that cannot be written before the (slow) bank build."""
+    from vibsynth.errors import ParameterError
+    from vibsynth.formats.wav_stream import check_target
+
+    if not args.wav:
+        raise ParameterError("the wav output needs a file: -o FILE.wav")
+    if args.seconds is None:
+        raise ParameterError("the wav output needs a duration: --seconds N")
+    check_target(args.wav, writable=True)

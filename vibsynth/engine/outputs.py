@@ -95,7 +95,7 @@ class CallbackStats:
 
     @property
     def callbacks(self) -> int:
-        return self._engine.stats.callbacks
+        return int(self._engine.stats.callbacks)
 
     @property
     def underflows(self) -> int:
@@ -146,7 +146,8 @@ def import_sounddevice() -> ModuleType:
         import sounddevice
     except OSError as exc:  # the PortAudio shared library is missing
         raise DeviceError(f"PortAudio is not available ({exc}); install libportaudio2") from None
-    return sounddevice
+    module: ModuleType = sounddevice
+    return module
 
 
 def _host_api_index(sd: ModuleType, host_api: str | int | None) -> int | None:
@@ -361,7 +362,7 @@ class SoundDeviceOutput(OutputBackend):
 
     def _host_api_name(self) -> str:
         try:
-            sd = self._sd
+            sd: Any = self._sd
             return str(sd.query_hostapis(sd.query_devices(self._device_index)["hostapi"])["name"])
         except Exception:  # noqa: BLE001 - informative only
             return ""
@@ -611,53 +612,111 @@ class NullOutput(OutputBackend):
 
 # ---------------------------------------------------------------------- wav
 class WavOutput(OutputBackend):
-    """Renders ``seconds`` of output as fast as possible and writes a float32 WAV file.
+    """Renders ``seconds`` of output as fast as possible into a float32 WAV file, streamed.
 
-    The file is written (atomically) when rendering finishes or :meth:`stop` is called.
+    The file is written block by block by a
+    :class:`~vibsynth.formats.wav_stream.WavStreamWriter` (memory: one block, whatever
+    the duration) and committed atomically when rendering finishes or :meth:`stop` is
+    called (then it holds what was rendered so far). Stopped before :meth:`start`,
+    nothing is written.
+
+    Parameters
+    ----------
+    engine : Engine
+    path : path-like
+        The WAV file. Its folder must exist and be writable: checked here, before any
+        rendering.
+    seconds : float
+        Duration (finite, > 0).
+    block_size : int
+        Frames rendered per block.
+
+    Raises
+    ------
+    ParameterError
+        A bad duration.
+    OSError
+        The file cannot be created (missing or read-only folder, a folder at ``path``);
+        ``filename`` names the culprit.
+
+    Notes
+    -----
+    A write that fails while rendering (disk full, the folder removed, the target
+    turned into a folder) leaves no file; it is kept in :attr:`error` and raised by
+    :meth:`stop`, so that ``vibsynth serve`` exits non-zero.
     """
 
     name = "wav"
 
     def __init__(self, engine: Engine, path: str | Path, *, seconds: float, block_size: int = 1024) -> None:
+        from vibsynth.formats.wav_stream import WavStreamWriter
+
         super().__init__(engine)
         if not (seconds > 0) or seconds != seconds or seconds == float("inf"):
             raise ParameterError(f"wav output needs a finite duration > 0 s, got {seconds!r}")
+        if int(block_size) != block_size or block_size <= 0:
+            raise ParameterError(f"wav output needs a block size > 0 frames, got {block_size!r}")
         self.path = Path(path)
         self.frames = int(round(seconds * engine.fs))
         self.block_size = int(block_size)
-        self._data = np.zeros((self.frames, engine.channels), dtype=np.float32)
+        self._writer = WavStreamWriter(self.path, engine.fs, engine.channels, frames=self.frames)
+        self._block = np.zeros((min(self.block_size, self.frames), engine.channels), dtype=np.float32)
         self._done = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        #: Set once the file is committed, or given up on (see :attr:`error`).
         self.written = threading.Event()
+        #: Why the file could not be written (raised once by :meth:`stop`), else None.
+        self.error: OSError | None = None
+
+    @property
+    def frames_done(self) -> int:
+        """Frames rendered and handed to the file so far."""
+        return self._done
 
     def _run(self) -> None:
-        while self._done < self.frames and not self._stop.is_set():
-            n = min(self.block_size, self.frames - self._done)
-            self.engine.render_into(self._data[self._done : self._done + n])
-            self._done += n
-            self.stats.callbacks += 1
-        self._write()
-
-    def _write(self) -> None:
-        from vibsynth.formats.recordings import write_wav
-
         try:
-            write_wav(self.path, self._data[: self._done], self.engine.fs)
+            while self._done < self.frames and not self._stop.is_set():
+                n = min(self.block_size, self.frames - self._done)
+                block = self._block[:n]
+                self.engine.render_into(block)
+                self._writer.write(block)
+                self._done += n
+                self.stats.callbacks += 1
+            self._writer.close()
         except OSError as exc:
-            log.error("cannot write %s: %s", self.path, exc)
-        self.written.set()
+            self._writer.abort()
+            self.error = exc
+            log.debug("cannot write %s: %s", self.path, exc)
+        except BaseException:
+            self._writer.abort()
+            raise
+        finally:
+            self.written.set()
 
     def start(self) -> None:
-        if self._thread is None:
+        if self._thread is None and not self._writer.closed:
             self._thread = threading.Thread(target=self._run, name="vibsynth-wav-output", daemon=True)
             self._thread.start()
 
     def stop(self) -> None:
+        """Stop rendering and commit what was rendered (nothing if never started).
+
+        Raises
+        ------
+        OSError
+            The file could not be written (once; nothing is left behind).
+        """
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
             self._thread = None
+        elif not self._writer.closed:  # never started: no file
+            self._writer.abort()
+            self.written.set()
+        error, self.error = self.error, None
+        if error is not None:
+            raise error
 
     def is_running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
