@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from vibsynth.cli._common import add_basis_argument, basis_from_args, finite_float, integer_in, number_in, sample_rate
+from vibsynth.cli._progress import RenderProgress, add_quiet_argument
 from vibsynth.errors import InputError, ParameterError
 
 ORDER = 55
@@ -86,6 +87,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     dec.add_argument("--absolute", action="store_true", help="undo the level offset (float WAV may exceed +-1)")
     dec.add_argument("--config", type=Path, metavar="FILE.yaml", help="engine config (bank grid, limiter, cache)")
     dec.add_argument("--json", action="store_true", help="machine-readable report")
+    add_quiet_argument(dec)
     add_basis_argument(dec)
     dec.set_defaults(func=run_decode)
 
@@ -250,7 +252,7 @@ def run_decode(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     try:
-        check_target(args.output)
+        check_target(args.output, writable=True)
     except OSError as exc:
         return _output_error(exc)
     decoded = vbt.read_vbt(args.input)
@@ -260,11 +262,14 @@ def run_decode(args: argparse.Namespace) -> int:
     rendered = vbt_render.prepare(traj, basis=basis, rate=args.rate, config_path=args.config)
     gain = 10.0 ** (rendered.offset_db / 20.0) if args.absolute else 1.0
     try:
-        with WavStreamWriter(args.output, rendered.fs, 1, frames=rendered.frames) as wav:
+        with (
+            WavStreamWriter(args.output, rendered.fs, 1, frames=rendered.frames) as wav,
+            RenderProgress("decode", rendered.frames, rendered.fs, quiet=args.quiet) as progress,
+        ):
             sink: Any = wav
             if ref is not None:  # the quality check needs the whole decoded signal, as the reference is held whole
                 sink = TeeSink(wav, ArrayCollector(rendered.frames, 1, np.float64, max_bytes=8 * rendered.frames))
-            done = vbt_render.render_to(rendered, GainSink(sink, gain) if args.absolute else sink)
+            done = vbt_render.render_to(rendered, GainSink(sink, gain) if args.absolute else sink, progress=progress)
     except OSError as exc:
         return _output_error(exc)
     decode_s = time.perf_counter() - started
@@ -294,14 +299,19 @@ def run_decode(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report, indent=2, default=float))
         return 0
+    if rendered.balance_clamped:
+        print(
+            f"vibsynth: warning: {rendered.balance_clamped} windows lie outside the engine's balance range (clamped)",
+            file=sys.stderr,
+        )
+    if args.quiet:
+        return 0
     print(f"{args.input} -> {args.output}: {done.seconds:.2f} s at {rendered.fs:g} Hz, {rendered.n_events} knob moves")
     if rendered.offset_db > 0 and not args.absolute:
         print(
             f"level: rendered {rendered.offset_db:.1f} dB below the encoded absolute level "
             f"(engine limit; --absolute undoes it in the float WAV)"
         )
-    if rendered.balance_clamped:
-        print(f"warning: {rendered.balance_clamped} windows lie outside the engine's balance range (clamped)")
     _print_ratios(report, traj.fs)
     if q is not None:
         _print_quality(q)

@@ -14,12 +14,16 @@ from vibsynth.cli._common import (
     add_basis_argument,
     basis_from_args,
     finite_float,
+    integer_in,
     positive_seconds,
     sample_rate,
     unit_interval,
 )
+from vibsynth.cli._inputs import wav_channel
+from vibsynth.cli._progress import RenderProgress, add_quiet_argument
 from vibsynth.cli.analyze import analyze_file
 from vibsynth.dsp.analysis import VARIANTS, variant_spectra
+from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB, knob_to_level_db
 from vibsynth.dsp.synthesis import SpectralShaper
 from vibsynth.errors import InputError, ParameterError
@@ -33,6 +37,9 @@ ORDER = 20
 MAX_PERIOD_FRAMES = 384_000
 #: Frames per block when streaming a period to the file.
 LOOP_BLOCK = 65_536
+#: A rendered balance further than this (knob units) from the one asked for is reported
+#: as saturated (the closed-form synthesis reaches the asked balance to ~1e-6 elsewhere).
+BALANCE_SATURATION_TOLERANCE = 0.01
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +52,9 @@ Render noise with the paper's spectrum model to a WAV file (a seamless loop of t
 The band powers of the result match the target within rounding (closed-form synthesis).
 The output is written as it renders: memory stays flat whatever --seconds. A texture longer
 than 8 s (at 48 kHz; 384,000 samples) repeats one seamless period of 4-8 s.
+A balance beyond what the basis can reach (about -5.4..+2.8 on the default one) is
+rendered at the edge, with a warning. A progress bar shows on a terminal (not with -q).
+Exit codes: 2 for a bad argument, 1 for a file that cannot be read or written.
 """
 
 
@@ -60,7 +70,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     source.add_argument("--from", dest="from_file", metavar="FILE", help="recording to re-synthesize")
     source.add_argument("--midi", metavar="FILE.mid", help="MIDI file to render through the MIDI mapping")
     p.add_argument("--intensity", type=unit_interval, metavar="I", help="intensity knob 0..1 (with --balance)")
-    p.add_argument("--channel", type=int, default=0, metavar="N", help="channel of a multi-channel WAV (with --from)")
+    p.add_argument(
+        "--channel",
+        type=wav_channel,
+        default=0,
+        metavar="N",
+        help="channel of a multi-channel WAV, 1 = the first (with --from)",
+    )
     p.add_argument("--variant", choices=list(VARIANTS), default="S1", help="variant (with --from; default S1)")
     p.add_argument("--seconds", type=positive_seconds, default=None, metavar="S", help="duration (default 4 s)")
     p.add_argument(
@@ -72,10 +88,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("-o", "--output", required=True, metavar="OUT.wav", help="WAV file to write")
     p.add_argument("--format", choices=("float32", "pcm16"), default="float32", help="WAV sample format")
-    p.add_argument("--seed", type=int, default=None, help="random phases (default: fresh)")
+    p.add_argument(
+        "--seed", type=integer_in(0, what="seed"), default=None, help="random phases, an integer >= 0 (default: fresh)"
+    )
     p.add_argument("--ceiling-db", type=finite_float, default=DEFAULT_CEILING_DB, help="intensity knob ceiling (dB)")
     p.add_argument("--range-db", type=finite_float, default=DEFAULT_RANGE_DB, help="intensity knob range (dB)")
     p.add_argument("--config", metavar="FILE", help="config file (with --midi)")
+    add_quiet_argument(p)
     add_basis_argument(p)
     p.set_defaults(func=run)
 
@@ -98,8 +117,11 @@ def _render_midi(args: argparse.Namespace) -> RenderResult:
     job = prepare_midi_render(
         args.midi, config=config, basis=basis_from_args(args), seconds=args.seconds, presets=presets
     )
-    with _writer(args, job.fs, job.engine.channels, job.frames) as wav:
-        return render_midi_to(job, _FullScaleGuard(wav, args.format))
+    with (
+        _writer(args, job.fs, job.engine.channels, job.frames) as wav,
+        RenderProgress("render", job.frames, job.fs, quiet=args.quiet) as progress,
+    ):
+        return render_midi_to(job, _FullScaleGuard(wav, args.format), progress=progress)
 
 
 def _render_loop(args: argparse.Namespace) -> RenderResult:
@@ -123,27 +145,71 @@ def _render_loop(args: argparse.Namespace) -> RenderResult:
     if analysis is None:
         level = knob_to_level_db(args.intensity, ceiling_db=args.ceiling_db, range_db=args.range_db)
         weights = shaper.solve_balance(basis, args.balance, level_db=level)
+        _warn_if_saturated(shaper, basis, weights, args)
     else:
         weights = shaper.solve_weights(variant_spectra(analysis, basis)[args.variant], level_db=analysis.level_db)
     source = LoopSource(shaper.render(shaper.power_envelope(weights), shaper.random_phases(rng)), fs)
     _check_full_scale(source.peak, args.format)
-    with _writer(args, fs, 1, frames) as wav:
-        return render(source, frames, wav, block=LOOP_BLOCK)
+    with (
+        _writer(args, fs, 1, frames) as wav,
+        RenderProgress("render", frames, fs, quiet=args.quiet) as progress,
+    ):
+        return render(source, frames, wav, block=LOOP_BLOCK, progress=progress)
+
+
+def reachable_balance(shaper: SpectralShaper, basis: Basis) -> tuple[float, float]:
+    """The lowest and highest balance (knob units) the closed-form synthesis can render on ``basis``.
+
+    Beyond them the *measured* balance saturates (``SpectralShaper.solve_balance``: the
+    filter bank's adjacent-band leakage caps the slopes a signal can show). The range
+    does not depend on the level (the shape is solved first, then scaled), so it holds
+    at every intensity.
+
+    Parameters
+    ----------
+    shaper : SpectralShaper
+    basis : Basis
+
+    Returns
+    -------
+    (low, high) : tuple of float
+    """
+    (_, low_t1), (_, high_t1) = shaper.reachable_t1(basis)
+    return float(basis.balance_from_t1(low_t1)), float(basis.balance_from_t1(high_t1))
+
+
+def _warn_if_saturated(shaper: SpectralShaper, basis: Basis, weights: np.ndarray, args: argparse.Namespace) -> None:
+    """One warning line when the rendered balance falls short of ``--balance`` (it saturated)."""
+    rendered = float(basis.balance_from_t1(basis.scores(shaper.weights_band_db(weights))[0]))
+    if abs(rendered - args.balance) <= BALANCE_SATURATION_TOLERANCE:
+        return
+    low, high = reachable_balance(shaper, basis)
+    print(
+        f"vibsynth: warning: balance {args.balance:g} is beyond what basis {basis.id} can render "
+        f"(reachable: {low:+.2f} .. {high:+.2f}, at intensity {args.intensity:g} as at any); "
+        f"rendered at {rendered:+.2f}",
+        file=sys.stderr,
+    )
 
 
 def run(args: argparse.Namespace) -> int:
+    """Exit 0; 1 (one line) when a file cannot be read or written; bad arguments raise (exit 2)."""
     try:
-        check_target(args.output)
+        check_target(args.output, writable=True)
         result = _render_midi(args) if args.midi else _render_loop(args)
     except OSError as exc:  # the output file: missing folder, a folder, no permission, disk full
         where = exc.filename if exc.filename is not None else args.output
         print(f"vibsynth: error: {where}: {exc.strerror or exc}", file=sys.stderr)
         return 1
+    except InputError as exc:  # an input file (recording, MIDI file, basis) that cannot be used
+        print(f"vibsynth: error: {exc}", file=sys.stderr)
+        return 1
     peak = result.peak
     if peak >= 1.0:  # float32 only: pcm16 refuses before anything is written
         print(f"vibsynth: warning: {_full_scale_message(peak)}; float32 WAV keeps it unclipped", file=sys.stderr)
     db = 20 * math.log10(peak) if peak > 0 else -math.inf
-    print(f"wrote {args.output}: {result.seconds:.2f} s at {result.fs:g} Hz, peak {db:.1f} dBFS")
+    if not args.quiet:
+        print(f"wrote {args.output}: {result.seconds:.2f} s at {result.fs:g} Hz, peak {db:.1f} dBFS")
     return 0
 
 
