@@ -523,3 +523,34 @@ def test_cli_render_subprocess_has_no_traceback(tmp_path):
         cwd=ROOT, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert done.returncode == 1 and "Traceback" not in done.stderr and done.stderr.count("\n") == 1
+
+
+# --------------------------------------------------------------------------- the public API
+def test_public_render_goes_through_the_one_renderer(monkeypatch):
+    """vibsynth.render: the shared renderer into an array collector, same samples as the engine's own loop."""
+    import vibsynth
+    from vibsynth.app import api
+    from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB
+    from vibsynth.formats.basis_file import default_basis
+
+    calls = []
+    real = api.render_offline
+
+    def spy(source, frames, sink, **kw):
+        calls.append((type(source).__name__, frames, type(sink).__name__))
+        return real(source, frames, sink, **kw)
+
+    monkeypatch.setattr(api, "render_offline", spy)
+    x = vibsynth.render(0.7, -0.4, 0.5, fs=8000.0, seed=11)
+    assert calls == [("Engine", 4000, "ArrayCollector")]
+    assert x.shape == (4000,) and x.dtype == np.float32 and x.flags.c_contiguous and x.flags.writeable
+    seconds = api.RENDER_LOOP_SECONDS
+    spec = BankSpec(fs=8000.0, loop_seconds=seconds, balance_min=-0.4, balance_max=0.6, levels=2, seed=11)
+    engine = Engine(
+        build_bank(default_basis(), spec), channels=1, ceiling_db=DEFAULT_CEILING_DB, range_db=DEFAULT_RANGE_DB,
+        glide_s=0.0, initial_intensity=0.7, initial_balance=-0.4,
+    )  # fmt: skip
+    np.testing.assert_array_equal(x, engine.render(4000)[:, 0])  # the former loop, bit for bit
+    with pytest.raises(ParameterError, match="too large to collect"):
+        vibsynth.render(0.5, 0.0, 3600.0, fs=48000.0)  # 691 MB: refused before the bank is built
+    assert len(calls) == 1

@@ -2,7 +2,9 @@
 
 They wrap the science (:mod:`vibsynth.dsp`) and the engine (:mod:`vibsynth.engine`) with
 the defaults a script wants: the shipped basis, files read by name, the engine's default
-intensity mapping. See docs/python.md.
+intensity mapping. :func:`render` goes through the one offline renderer
+(:func:`vibsynth.app.render.render`, into an :class:`~vibsynth.app.render.ArrayCollector`),
+like every other offline render. See docs/python.md.
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ import secrets
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from vibsynth.app.render import ArrayCollector
+from vibsynth.app.render import render as render_offline
 from vibsynth.dsp.analysis import Analysis
 from vibsynth.dsp.analysis import analyze as _analyze
 from vibsynth.dsp.basis import Basis
@@ -137,7 +141,10 @@ def render(
     Raises
     ------
     ParameterError
-        A value outside its range.
+        A value outside its range, or a render too long to hold in memory (over
+        :data:`~vibsynth.app.render.MAX_COLLECT_BYTES`, 23 min at 48 kHz: stream it to a
+        WAV file with :func:`vibsynth.app.render.render` and a
+        :class:`~vibsynth.formats.wav_stream.WavStreamWriter` instead).
     """
     intensity = _finite("intensity", intensity, low=0.0, high=1.0)
     balance = _finite("balance", balance)
@@ -159,6 +166,7 @@ def render(
         levels=2,
         seed=int(seed),
     )
+    collector = ArrayCollector(frames, 1)  # refuses an over-long render before the bank is built
     bank = build_bank(basis if basis is not None else default_basis(), spec)
     engine = Engine(
         bank,
@@ -169,5 +177,6 @@ def render(
         initial_intensity=intensity,
         initial_balance=balance,
     )
-    out: NDArray[np.float32] = np.ascontiguousarray(engine.render(frames)[:, 0])
+    result = render_offline(engine, frames, collector)
+    out: NDArray[np.float32] = result.output.reshape(frames)  # (frames, 1) -> (frames,), a view
     return out
