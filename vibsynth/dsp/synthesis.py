@@ -30,7 +30,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import brentq, minimize_scalar, nnls
 
 from vibsynth.dsp.filterbank import (
     BAND_CENTRES_HZ,
@@ -199,6 +198,8 @@ class SpectralShaper:
         # Solve on a level-neutral scale, then rescale: keeps NNLS well conditioned.
         offset = float(target_db.mean())
         target = 10.0 ** ((target_db - offset) / 10.0)
+        from scipy.optimize import nnls  # imported when first needed: scipy.optimize takes 0.3 s to load
+
         weights, _ = nnls(self._gain_matrix, target, maxiter=50 * target.size)
         if level_db is None:
             return np.asarray(weights * 10.0 ** (offset / 10.0), dtype=np.float64)
@@ -250,6 +251,8 @@ class SpectralShaper:
             def measured(requested: float) -> float:
                 w = self.solve_weights(basis.mean_db + requested * basis.v1, level_db=0.0)
                 return float(basis.scores(self.weights_band_db(w))[0])
+
+            from scipy.optimize import minimize_scalar
 
             sides = []
             for sign, span in ((-1.0, -basis.t1_from_balance(-1.0)), (1.0, basis.t1_from_balance(1.0))):
@@ -311,6 +314,8 @@ class SpectralShaper:
         if goal <= low_t1:
             return solve_for(low_req)
         edge = high_req if first < 0 else low_req
+        from scipy.optimize import brentq
+
         requested = brentq(miss, min(goal, edge), max(goal, edge), xtol=tolerance_t1 / 10)
         return solve_for(requested)
 
