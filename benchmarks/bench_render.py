@@ -8,6 +8,7 @@ loaded from a warm cache; imports excluded). Kinds, all at 48 kHz, mono float32:
 * ``midi``     ``vibsynth render --midi`` of a generated file: notes and a CC 74 move every 50 ms
 * ``preset``   ``vibsynth preset play brick -o`` (the engine with one preset)
 * ``decode``   ``vibsynth decode --rate 48000`` of a generated per-window ``.vbt`` (a knob move every 50 ms)
+* ``serve``    ``vibsynth serve --output wav -o`` (``WavOutput``: the engine rendered as fast as possible)
 
 Lengths: 60 s and 600 s; ``--long`` adds 3600 s. Prints a table and writes
 ``benchmarks/results/bench_render.json``.
@@ -37,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 RESULTS = ROOT / "benchmarks" / "results" / "bench_render.json"
-KINDS = ("texture", "midi", "preset", "decode")
+KINDS = ("texture", "midi", "preset", "decode", "serve")
 RATE = 48000
 
 CHILD = textwrap.dedent(
@@ -108,6 +109,9 @@ def case_args(kind: str, seconds: float, work: Path, config: Path, out: Path) ->
         if not traj.exists():
             write_vbt(traj, seconds)
         return ["decode", str(traj), "--rate", str(RATE), "--config", str(config), "-o", str(out)]
+    if kind == "serve":
+        flags = ["--output", "wav", "--intensity", "0.5", "--no-osc", "--no-midi"]
+        return ["serve", "--config", str(config), *flags, "--seconds", s, "-o", str(out)]
     raise ValueError(kind)
 
 
