@@ -97,3 +97,35 @@ def test_analyze_reads_the_second_channel_as_2(tmp_path, capsys, basis):
         row = next(csv.DictReader(io.StringIO(capsys.readouterr().out)))
         levels.append(float(row["level_db"]))
     assert levels == [pytest.approx(-50.0, abs=0.1), pytest.approx(-30.0, abs=0.1)]
+
+
+def test_devices_in_every_format(monkeypatch, capsys):
+    from vibsynth.control.midi import adapter
+    from vibsynth.engine import outputs
+
+    apis = [{"index": 0, "name": "JACK Audio Connection Kit", "default_output_device": 1}]
+    devices = [
+        {
+            "index": k,
+            "name": f"system playback with a long descriptive name #{k}",
+            "hostapi": 0,
+            "max_output_channels": 2 * (k + 1),
+            "default_samplerate": 48000.0,
+            "default_low_output_latency": 0.00533,
+        }
+        for k in range(2)
+    ]
+    monkeypatch.setattr(outputs, "list_devices", lambda: (apis, devices))
+    monkeypatch.setattr(adapter, "list_inputs", lambda: ["Keystation 49:0"])
+    assert main(["devices"]) == 0
+    out = capsys.readouterr().out
+    assert "system playback with a long descriptive name #0" in out and "JACK Audio Connection Kit" in out
+    starred = [line for line in out.splitlines() if line.lstrip().startswith("*")]
+    assert len(starred) == 1 and "#1" in starred[0] and "5.3" in starred[0]
+    assert "0: Keystation 49:0" in out
+    assert main(["devices", "--format", "csv"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert [(r["index"], r["outputs"], r["default"]) for r in rows] == [("0", "2", "False"), ("1", "4", "True")]
+    assert main(["devices", "--format", "json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["midi_inputs"] == ["Keystation 49:0"] and data["audio"][1]["latency_ms"] == pytest.approx(5.33)

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from vibsynth.cli._common import Progress, add_basis_argument, basis_from_args, integer_in, sample_rate
+from vibsynth.cli._table import Column, add_format_argument, emit, output_format
 
 ORDER = 52
 
@@ -38,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     fit.add_argument("--allow-negative", action="store_true", help="do not constrain weights to be >= 0")
     fit.add_argument("--no-self-pairs", action="store_true", help="ignore ratings of a file with itself")
     fit.add_argument("--rate", type=sample_rate, help="sample rate of CSV/TXT recordings (Hz)")
-    fit.add_argument("--json", action="store_true", help="machine-readable output")
+    add_format_argument(fit)
     add_basis_argument(fit)
     fit.set_defaults(func=run_fit)
 
@@ -60,7 +61,24 @@ def run_fit(args: argparse.Namespace) -> int:
         positive=not args.allow_negative,
         solver=args.solver,
     )
-    if args.json:
+    fmt = output_format(args)
+    k = fit.weights.size
+    if fmt == "csv":
+        rows = [
+            {
+                "component": f"T{j + 1}",
+                "weight": float(fit.weights[j]),
+                "weight_mean": float(fit.weights_mean[j]),
+                "weight_sd": float(fit.weights_sd[j]),
+                "selected_fraction": float(fit.selected_fraction[j]),
+                "r2_alone": float(fit.r2_single_mean[j]),
+                "r2_first_i": float(fit.r2_first_mean[j]),
+            }
+            for j in range(k)
+        ]
+        emit(rows, [Column(key, key) for key in rows[0]], "csv")
+        return 0
+    if fmt == "json":
         out = fit.to_dict()
         out.update(
             {
@@ -72,7 +90,6 @@ def run_fit(args: argparse.Namespace) -> int:
         )
         print(json.dumps(out, indent=2))
         return 0
-    k = fit.weights.size
     print(
         f"{table.n_rows} ratings -> {fit.n_pairs} pairs of {len(table.files)} recordings "
         f"(basis {basis.id}); {fit.n_splits} splits of {fit.n_train} train / {fit.n_test} test, "
