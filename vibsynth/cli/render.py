@@ -44,7 +44,7 @@ BALANCE_SATURATION_TOLERANCE = 0.01
 log = logging.getLogger(__name__)
 
 HELP = """\
-Render noise with the paper's spectrum model to a WAV file (a seamless loop of the given length):
+Render noise with the paper's spectrum model (a texture loops seamlessly) to a WAV file:
   --balance B --intensity I   the spectrum M + t1(B) V1 at intensity knob I (0..1; see --ceiling-db)
   --from FILE --variant V     a recording's experiment-3 variant at the recording's own level:
                               S1 = M + t1 V1, S1:8 = all 8 components, S2:8 = all but the first, M = mean
