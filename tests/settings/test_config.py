@@ -11,13 +11,16 @@ from vibsynth.errors import ConfigError
 from vibsynth.settings.actuators import load_actuator_profile, resolve_actuator_response
 from vibsynth.settings.config import (
     ENV_VARS,
-    SCHEMA,
     check_config_file,
     default_config_data,
     load_config,
     parse_override,
 )
+from vibsynth.settings.models import VibsynthConfig
+from vibsynth.settings.validation import model_spec
 from vibsynth.settings.yamldoc import parse_yaml
+
+KEYS = model_spec(VibsynthConfig).leaves
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -55,12 +58,12 @@ def test_repo_config_default_is_the_package_file():
     assert repo_copy.resolve() == package.resolve(), "config/default.yaml must be a symlink to the package data"
 
 
-def test_every_default_key_has_a_spec_and_every_spec_a_default():
+def test_every_default_key_is_a_model_key_and_every_model_key_has_its_default():
     config = load_config(user_file=False, env={})
     leaves = config.leaves()
-    assert set(leaves) == set(SCHEMA)
+    assert set(leaves) == set(KEYS)
     for key, value in leaves.items():
-        assert SCHEMA[key].check(value) is None, key
+        assert value == KEYS[key].default, key
 
 
 def test_default_sources_name_the_package_file_and_line():
@@ -90,7 +93,7 @@ def test_default_sources_name_the_package_file_and_line():
         ("audioo:\n  rate: 48000\n", ["{path}:2:", "unknown key 'audioo.rate'"]),
         ("\n\nbank:\n  levels: 1\n", ["{path}:4:", "bank.levels = 1", "[2, 1001]"]),
         ("knobs:\n  limiter_ceiling: 0\n", ["{path}:2:", "outside the allowed range (0, 1]"]),
-        ("knobs:\n  glide_ms: true\n", ["{path}:2:", "knobs.glide_ms = True", "must be a number"]),
+        ("knobs:\n  glide_ms: true\n", ["{path}:2:", "knobs.glide_ms = true", "must be a number"]),
         ("osc:\n  enabled: yes please\n", ["{path}:2:", "osc.enabled", "true or false"]),
         ("osc:\n  port: 70000\n", ["{path}:2:", "osc.port = 70000", "[0, 65535]"]),
         ("osc:\n  prefix: vibsynth\n", ["{path}:2:", "osc.prefix = 'vibsynth'", "an OSC address"]),
@@ -290,7 +293,7 @@ def test_user_actuator_profile_and_its_errors(tmp_path):
 
 def test_docs_list_every_key_and_env_var():
     text = (ROOT / "docs" / "config.md").read_text(encoding="utf-8")
-    missing = [key for key in SCHEMA if f"`{key}`" not in text] + [var for var in ENV_VARS if f"`{var}`" not in text]
+    missing = [key for key in KEYS if f"`{key}`" not in text] + [var for var in ENV_VARS if f"`{var}`" not in text]
     assert not missing, f"docs/config.md does not document: {missing}"
 
 

@@ -30,10 +30,12 @@ from vibsynth.dsp.basis import Basis
 from vibsynth.engine.actuator import ActuatorResponse
 from vibsynth.engine.bank import BankSpec, load_or_build
 from vibsynth.engine.commands import SetMute
-from vibsynth.engine.engine import DEFAULT_SCHEDULE_CAPACITY, Engine
+from vibsynth.engine.engine import Engine
 from vibsynth.engine.outputs import NullOutput, OutputBackend, SoundDeviceOutput, WavOutput
 from vibsynth.engine.supervisor import STREAMING, ExitGuard, hard_exit
 from vibsynth.errors import ConfigError, DeviceError, ParameterError, VibsynthError
+from vibsynth.settings.actuators import resolve_actuator_response
+from vibsynth.settings.config import settings_of
 
 __all__ = ["build_engine", "open_output", "serve", "actuator_from_config", "status_line"]
 
@@ -44,20 +46,10 @@ log = logging.getLogger(__name__)
 EXIT_DEADLINE_S = 1.5
 
 
-def _get(config: Any, section: str, key: str, default: Any = None) -> Any:
-    return config.data.get(section, {}).get(key, default)
-
-
 def actuator_from_config(config: Any) -> ActuatorResponse:
     """The actuator response to equalise for (explicit points, else the profile, else flat)."""
-    points: Any = None
-    try:
-        from vibsynth.settings.actuators import resolve_actuator_response  # the full config module
-    except ImportError:
-        points = _get(config, "actuator", "response")
-    else:
-        points = resolve_actuator_response(config)
-    return ActuatorResponse.from_points(points, max_boost_db=_get(config, "actuator", "max_boost_db", 12.0))
+    points = resolve_actuator_response(config)
+    return ActuatorResponse.from_points(points, max_boost_db=settings_of(config).actuator.max_boost_db)
 
 
 def build_engine(
@@ -82,20 +74,21 @@ def build_engine(
         from vibsynth.formats.basis_file import default_basis
 
         basis = default_basis()
-    audio, bank_cfg, knobs = config.data["audio"], config.data["bank"], config.data["knobs"]
+    settings = settings_of(config)
+    audio, bank_cfg, knobs = settings.audio, settings.bank, settings.knobs
     try:
         spec = BankSpec(
-            fs=float(audio["rate"]),
-            loop_seconds=float(bank_cfg["loop_seconds"]),
-            balance_min=float(bank_cfg["balance_min"]),
-            balance_max=float(bank_cfg["balance_max"]),
-            levels=int(bank_cfg["levels"]),
-            seed=int(bank_cfg["seed"]),
+            fs=float(audio.rate),
+            loop_seconds=bank_cfg.loop_seconds,
+            balance_min=bank_cfg.balance_min,
+            balance_max=bank_cfg.balance_max,
+            levels=bank_cfg.levels,
+            seed=bank_cfg.seed,
             actuator=actuator_from_config(config),
         )
     except (ParameterError, TypeError, ValueError) as exc:
         raise ConfigError(f"bank/audio settings: {exc}") from None
-    cache_dir = bank_cfg.get("cache_dir")
+    cache_dir = bank_cfg.cache_dir
     started = time.perf_counter()
     bank, origin = load_or_build(basis, spec, cache_dir=cache_dir, progress=progress)
     log.info(
@@ -106,32 +99,23 @@ def build_engine(
         bank.n_samples / bank.fs,
         bank.fs,
     )
-    block = int(audio.get("block_size") or 0)
+    block = audio.block_size
     try:
         return Engine(
             bank,
-            channels=int(audio["channels"]),
-            ceiling_db=float(knobs["ceiling_db"]),
-            range_db=float(knobs["range_db"]),
-            glide_s=float(knobs["glide_ms"]) / 1000.0,
-            mute_fade_s=float(knobs["mute_fade_ms"]) / 1000.0,
-            limiter_ceiling=float(knobs["limiter_ceiling"]),
-            initial_intensity=float(knobs.get("initial_intensity", 0.0)),
-            initial_balance=float(knobs.get("initial_balance", 0.0)),
-            schedule_capacity=int(knobs.get("schedule_capacity", DEFAULT_SCHEDULE_CAPACITY)),
+            channels=audio.channels,
+            ceiling_db=knobs.ceiling_db,
+            range_db=knobs.range_db,
+            glide_s=knobs.glide_ms / 1000.0,
+            mute_fade_s=knobs.mute_fade_ms / 1000.0,
+            limiter_ceiling=knobs.limiter_ceiling,
+            initial_intensity=knobs.initial_intensity,
+            initial_balance=knobs.initial_balance,
+            schedule_capacity=knobs.schedule_capacity,
             max_block=block if 0 < block < bank.n_samples else 1024,
         )
     except ParameterError as exc:
         raise ConfigError(f"engine settings: {exc}") from None
-
-
-def _latency(value: Any) -> str | float:
-    if isinstance(value, str) and value in ("low", "high"):
-        return value
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"audio.latency must be low, high or seconds, got {value!r}") from None
 
 
 def open_output(
@@ -149,9 +133,9 @@ def open_output(
     unless ``explicit_device`` (the user named a device or the sounddevice
     backend): then the :class:`DeviceError` propagates.
     """
-    audio = config.data["audio"]
-    backend = audio.get("backend") or "auto"
-    block = int(audio.get("block_size") or 0)
+    audio = settings_of(config).audio
+    backend = audio.backend
+    block = audio.block_size
     if backend == "null":
         return NullOutput(engine, block_size=block or 128)
     if backend == "wav":
@@ -160,15 +144,13 @@ def open_output(
         if seconds is None:
             raise ParameterError("the wav output needs a duration: --seconds N")
         return WavOutput(engine, wav_path, seconds=seconds, block_size=block or 1024)
-    if backend not in ("auto", "sounddevice"):
-        raise ConfigError(f"audio.backend must be auto, sounddevice, null or wav, got {backend!r}")
     output = SoundDeviceOutput(
         engine,
-        device=audio.get("device"),
-        host_api=audio.get("host_api"),
+        device=audio.device,
+        host_api=audio.host_api,
         block_size=block,
-        latency=_latency(audio.get("latency", "low")),
-        channel_map=audio.get("channel_map"),
+        latency=audio.latency,
+        channel_map=None if audio.channel_map is None else list(audio.channel_map),
     )
     try:
         output.open()
@@ -249,8 +231,9 @@ def serve(config: Any, args: Any, *, owns_process: bool = False) -> int:
 
 def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) -> int:
     err = sys.stderr
-    knobs = config.data["knobs"]
-    limits = KnobLimits(balance_min=float(knobs["balance_min"]), balance_max=float(knobs["balance_max"]))
+    settings = settings_of(config)
+    knobs = settings.knobs
+    limits = KnobLimits(balance_min=knobs.balance_min, balance_max=knobs.balance_max)
     intensity, balance = getattr(args, "intensity", None), getattr(args, "balance", None)
     # Validate the command line before the (possibly slow) bank build.
     from vibsynth.control.controller import check_range
@@ -279,12 +262,9 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
         engine,
         limits=limits,
         preset_resolver=library.get if library is not None else None,
-        initial_glide_s=float(knobs["glide_ms"]) / 1000.0,
+        initial_glide_s=knobs.glide_ms / 1000.0,
     )
-    for name, value in (
-        ("balance", knobs.get("initial_balance", 0.0)),
-        ("intensity", knobs.get("initial_intensity", 0.0)),
-    ):
+    for name, value in (("balance", knobs.initial_balance), ("intensity", knobs.initial_intensity)):
         if value:
             controller.set_knob(name, float(value), glide_s=0.0, source="config")
     if getattr(args, "preset", None):
@@ -297,7 +277,7 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
     explicit = bool(
         getattr(args, "device", None) is not None
         or getattr(args, "output", None) == "sounddevice"
-        or config.data["audio"].get("device") is not None
+        or settings.audio.device is not None
     )
     output = open_output(
         config, engine, explicit, wav_path=getattr(args, "wav", None), seconds=getattr(args, "seconds", None)
@@ -314,7 +294,7 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
             if server is not None:
                 server.start()
                 servers.append(server)
-        if library is not None and watcher_cls is not None and config.data.get("presets", {}).get("watch", True):
+        if library is not None and watcher_cls is not None and settings.presets.watch:
             watcher = watcher_cls(library, on_change=lambda name: controller.reapply_preset(name), interval_s=0.5)
             watcher.start()
         if not stop.is_set():
@@ -324,7 +304,7 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
         print(f"vibsynth: serving {engine.channels} channel(s) on {output.describe()}", file=out)
         for server in servers:
             print(f"vibsynth: {server.describe()}", file=out)
-        prefix = str(config.data.get("osc", {}).get("prefix", "/vibsynth")).rstrip("/")
+        prefix = settings.osc.prefix.rstrip("/")
         silent = all(k == 0 for k, _, _ in engine.knob_values()) and not intensity
         hint = "silent until a control arrives; " if silent else ""
         print(

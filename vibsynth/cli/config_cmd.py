@@ -1,4 +1,4 @@
-"""``vibsynth config show|check|path``: the effective configuration and where each value comes from."""
+"""``vibsynth config show|check|path|schema``: the effective configuration and where each value comes from."""
 
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ import yaml
 from vibsynth.settings.actuators import resolve_actuator_response
 from vibsynth.settings.config import (
     ENV_VARS,
-    SCHEMA,
     add_config_arguments,
     check_config_file,
     config_from_args,
@@ -72,6 +71,13 @@ def cmd_path(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_schema(args: argparse.Namespace) -> int:
+    from vibsynth.settings.schema import schema_text
+
+    print(schema_text(args.kind), end="")
+    return 0
+
+
 def register(subparsers: Any) -> None:
     """Add ``vibsynth config ...``."""
     parser = subparsers.add_parser(
@@ -98,5 +104,15 @@ def register(subparsers: Any) -> None:
     p = sub.add_parser("path", help="where the user config file is and which environment variables apply")
     p.set_defaults(func=cmd_path)
 
-
-_ = SCHEMA  # documented keys live in vibsynth.settings.config.SCHEMA
+    p = sub.add_parser(
+        "schema",
+        help="print the JSON Schema of config files (editor completion and inline errors; docs/config.md)",
+    )
+    p.add_argument(
+        "kind",
+        nargs="?",
+        choices=("config", "actuator"),
+        default="config",
+        help="config (default) or actuator (an actuator profile)",
+    )
+    p.set_defaults(func=cmd_schema)

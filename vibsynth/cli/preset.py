@@ -13,9 +13,11 @@ from typing import Any
 
 from vibsynth import __version__
 from vibsynth.errors import PresetError
+from vibsynth.settings.cli_args import flag_type
 from vibsynth.settings.config import Config, add_config_arguments, config_from_args
 from vibsynth.settings.library import PresetLibrary, load_library
-from vibsynth.settings.presets import BALANCE_LIMIT, GLIDE_MAX_MS, Preset, preset_to_yaml
+from vibsynth.settings.models import PresetModel
+from vibsynth.settings.presets import BALANCE_LIMIT, Preset, preset_to_yaml
 
 __all__ = ["ORDER", "register"]
 
@@ -35,16 +37,6 @@ def _float_in(low: float, high: float, unit: str = "") -> Any:
         return value
 
     return parse
-
-
-def _program(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if not 0 <= value <= 127:
-        raise argparse.ArgumentTypeError(f"{value} is outside the allowed range [0, 127]")
-    return value
 
 
 def _tags(text: str) -> list[str]:
@@ -253,6 +245,13 @@ def _preset_engine(config: Config, library: PresetLibrary, name: str) -> Any:
     return engine
 
 
+def cmd_schema(args: argparse.Namespace) -> int:
+    from vibsynth.settings.schema import schema_text
+
+    print(schema_text("preset"), end="")
+    return 0
+
+
 def cmd_play(args: argparse.Namespace) -> int:
     device: Any = args.device
     if isinstance(device, str) and device.isdigit():
@@ -332,8 +331,8 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=cmd_show)
 
     def add_common_new(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--glide-ms", type=_float_in(0, GLIDE_MAX_MS, " ms"), help="glide when applied (ms)")
-        p.add_argument("--program", type=_program, help="MIDI program number 0..127")
+        p.add_argument("--glide-ms", type=flag_type("glide_ms", PresetModel), help="glide when applied (ms)")
+        p.add_argument("--program", type=flag_type("program", PresetModel), help="MIDI program number 0..127")
         p.add_argument("--tags", type=_tags, help="comma-separated tags")
         p.add_argument("--description")
         p.add_argument("-o", "--output", type=Path, help="write here instead of the user preset folder")
@@ -342,8 +341,8 @@ def register(subparsers: Any) -> None:
     p = sub.add_parser("new", help="create a user preset")
     add_config_arguments(p)
     p.add_argument("name")
-    p.add_argument("--balance", type=_float_in(-BALANCE_LIMIT, BALANCE_LIMIT), help="balance (knob units)")
-    p.add_argument("--intensity", type=_float_in(0, 1), help="intensity 0..1")
+    p.add_argument("--balance", type=flag_type("balance", PresetModel), help="balance (knob units)")
+    p.add_argument("--intensity", type=flag_type("intensity", PresetModel), help="intensity 0..1")
     p.add_argument("--like", metavar="PRESET", help="start from an existing preset's values")
     add_common_new(p)
     p.set_defaults(func=cmd_new)
@@ -365,5 +364,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("-o", "--output", type=Path, help="write a WAV file instead of playing")
     p.add_argument("--format", choices=("float32", "pcm16"), default="float32", help="WAV sample format")
     p.add_argument("--device", help="output device (name substring or index; default: audio.device)")
-    p.add_argument("--channels", type=int, help="actuator channels (default: audio.channels)")
+    p.add_argument("--channels", type=flag_type("audio.channels"), help="actuator channels (default: audio.channels)")
     p.set_defaults(func=cmd_play)
+
+    p = sub.add_parser("schema", help="print the JSON Schema of a preset file (editor completion; docs/presets.md)")
+    p.set_defaults(func=cmd_schema)

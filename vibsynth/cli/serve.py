@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 from typing import Any
 
-from vibsynth.cli._common import finite_float, integer_in, number_in, unit_interval
+from vibsynth.cli._common import finite_float, number_in
+from vibsynth.settings.cli_args import flag_choices, flag_type
 
 ORDER = 5
 
@@ -29,13 +29,8 @@ SIGTERM/Ctrl-C exit (code 0) within 2 s in every state.
 """
 
 
-_channels = integer_in(1, 64, what="channels")
 #: serve --seconds: stop after this long (no upper bound beyond a day).
 _seconds = number_in(0.0, 86400.0, unit="s", low_open=True)
-
-
-def _device(text: str) -> int | str:
-    return int(text) if text.strip().isdigit() else text
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -45,25 +40,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    try:
-        from vibsynth.settings.config import add_config_arguments
-    except ImportError:
-        p.add_argument("--config", metavar="FILE.yaml", type=Path, help="user config file")
-    else:
-        add_config_arguments(p)
+    from vibsynth.settings.config import add_config_arguments
+
+    add_config_arguments(p)
     p.add_argument("--preset", metavar="NAME", help="start with this preset")
     p.add_argument("--balance", type=finite_float, metavar="B", help="initial balance (knob units)")
-    p.add_argument("--intensity", type=unit_interval, metavar="I", help="initial intensity 0..1 (default 0: silent)")
-    p.add_argument("--channels", type=_channels, metavar="N", help="actuator channels (default audio.channels)")
+    p.add_argument(
+        "--intensity",
+        type=flag_type("knobs.initial_intensity"),
+        metavar="I",
+        help="initial intensity 0..1 (default 0: silent)",
+    )
+    p.add_argument(
+        "--channels", type=flag_type("audio.channels"), metavar="N", help="actuator channels (default audio.channels)"
+    )
     p.add_argument(
         "--output",
-        choices=("auto", "sounddevice", "null", "wav"),
+        choices=flag_choices("audio.backend"),
         default=None,
         help="output backend (default audio.backend, auto)",
     )
     p.add_argument(
         "--device",
-        type=_device,
+        type=flag_type("audio.device"),
         metavar="NAME|INDEX",
         help="audio output device (name substring or index; see `vibsynth devices`)",
     )
@@ -80,17 +79,8 @@ def _config(args: argparse.Namespace) -> Any:
     extra = {"audio.channels": args.channels, "audio.backend": args.output, "audio.device": args.device}
     if args.wav and args.output is None:
         extra["audio.backend"] = "wav"
-    try:
-        from vibsynth.settings.config import config_from_args
-    except ImportError:
-        from vibsynth.settings.config import load_config
+    from vibsynth.settings.config import config_from_args
 
-        nested: dict[str, dict[str, Any]] = {}
-        for key, value in extra.items():
-            if value is not None:
-                section, name = key.split(".")
-                nested.setdefault(section, {})[name] = value
-        return load_config(getattr(args, "config", None), overrides=nested or None)
     return config_from_args(args, extra=extra)
 
 

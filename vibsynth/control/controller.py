@@ -31,6 +31,7 @@ from typing import Protocol
 from vibsynth.control.tap import InputTap
 from vibsynth.engine.commands import KNOB_NAMES, Command, Panic, SetGlide, SetKnob, SetMute
 from vibsynth.errors import ParameterError, PresetError
+from vibsynth.settings.models import bounds_of, default_of
 
 __all__ = [
     "EngineLike",
@@ -85,9 +86,9 @@ class KnobLimits:
         Longest glide accepted.
     """
 
-    balance_min: float = -3.5
-    balance_max: float = 3.5
-    glide_max_s: float = 10.0
+    balance_min: float = default_of("knobs.balance_min")
+    balance_max: float = default_of("knobs.balance_max")
+    glide_max_s: float = float(bounds_of("knobs.glide_ms")[1] or 0.0) / 1000.0
 
 
 @dataclass(frozen=True)

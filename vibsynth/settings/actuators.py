@@ -1,4 +1,8 @@
-"""Actuator profiles: named frequency responses (shipped and user files) a config can name."""
+"""Actuator profiles: named frequency responses (shipped and user files) a config can name.
+
+A profile file is checked against :class:`~vibsynth.settings.models_preset.ActuatorProfileModel`
+(keys, ranges and help text defined there); errors name ``file:line``, the key and the range.
+"""
 
 from __future__ import annotations
 
@@ -7,22 +11,24 @@ from pathlib import Path
 from typing import Any
 
 from vibsynth.errors import ConfigError
-from vibsynth.settings.config import _PROFILE_NAME, Config, _close, _fmt, _points, boolean, string, user_config_file
+from vibsynth.settings.config import Config, settings_of, user_config_file
+from vibsynth.settings.models_preset import ActuatorProfileModel
+from vibsynth.settings.validation import did_you_mean, model_spec, validate
 from vibsynth.settings.yamldoc import read_yaml_file
 
+__all__ = ["ACTUATOR_RESOURCE", "user_profile_dir", "actuator_profiles", "load_actuator_profile"]
+
 ACTUATOR_RESOURCE = "config/actuators"
-_PROFILE_KEYS = {
-    "name": string(pattern=_PROFILE_NAME, what="a profile name (letters, digits, . _ -)"),
-    "description": string(what="text"),
-    "example": boolean(),
-    "source": string(what="text"),
-    "response": _points("Hz", 0, True, -60, 60, 1, False, "response points"),
-}
 
 
 def user_profile_dir() -> Path:
     """Folder for user actuator profiles: ``actuators/`` in the platform config folder."""
     return user_config_file().parent / "actuators"
+
+
+def shipped_profile_dir() -> Path:
+    """Folder of the actuator profiles shipped as package data."""
+    return Path(str(resources.files("vibsynth.data").joinpath(ACTUATOR_RESOURCE)))
 
 
 def actuator_profiles() -> dict[str, str]:
@@ -40,55 +46,54 @@ def actuator_profiles() -> dict[str, str]:
     return out
 
 
+def read_actuator_profile(path: str | Path, name: str | None = None) -> ActuatorProfileModel:
+    """Read and validate one actuator profile file (``name``: the expected name, default the file stem)."""
+    p = Path(path)
+    name = p.stem if name is None else name
+    doc = read_yaml_file(p, what="an actuator profile")
+    if not isinstance(doc.data, dict):
+        raise ConfigError(f"{doc.origin}: an actuator profile must be a mapping with name, description, response")
+    model: ActuatorProfileModel = validate(model_spec(ActuatorProfileModel), doc.data, doc, ConfigError)
+    if model.name is not None and model.name != name:
+        raise ConfigError(f"{doc.where(('name',))}: name = {model.name!r} does not match the file name {name}.yaml")
+    return model
+
+
 def load_actuator_profile(name: str) -> dict[str, Any]:
     """Read and validate one actuator profile by name.
 
     Returns
     -------
     profile : dict
-        ``name``, ``description``, ``example`` (True for illustrative profiles), ``response`` [[Hz, dB], ...].
+        ``name``, ``description``, ``example`` (True for illustrative profiles), ``source``,
+        ``response`` [[Hz, dB], ...], ``file``.
     """
     profiles = actuator_profiles()
     if name not in profiles:
         raise ConfigError(
-            f"unknown actuator profile {name!r}{_close(name, list(profiles))} "
+            f"unknown actuator profile {name!r}{did_you_mean(name, list(profiles))} "
             f"(available: {', '.join(sorted(profiles))})"
         )
-    doc = read_yaml_file(profiles[name], what="an actuator profile")
-    if not isinstance(doc.data, dict):
-        raise ConfigError(f"{doc.origin}: an actuator profile must be a mapping with name, description, response")
-    for key, value in doc.data.items():
-        spec = _PROFILE_KEYS.get(key)
-        if spec is None:
-            raise ConfigError(f"{doc.where((str(key),))}: unknown key {key!r} (allowed: {', '.join(_PROFILE_KEYS)})")
-        reason = spec.check(value)
-        if reason:
-            raise ConfigError(f"{doc.where((str(key),))}: {key} = {_fmt(value)}: {reason} (allowed: {spec.allowed})")
-    if "response" not in doc.data:
-        raise ConfigError(f"{doc.origin}: missing key 'response' ([[Hz, dB], ...])")
-    if doc.data.get("name", name) != name:
-        raise ConfigError(
-            f"{doc.where(('name',))}: name = {doc.data['name']!r} does not match the file name {name}.yaml"
-        )
+    model = read_actuator_profile(profiles[name], name)
     return {
         "name": name,
-        "description": doc.data.get("description", ""),
-        "example": doc.data.get("example", False),
-        "source": doc.data.get("source", ""),
-        "response": doc.data["response"],
-        "file": doc.origin,
+        "description": model.description,
+        "example": model.example,
+        "source": model.source,
+        "response": [list(point) for point in model.response],
+        "file": profiles[name],
     }
 
 
-def resolve_actuator_response(config: Config) -> list[tuple[float, float]]:
+def resolve_actuator_response(config: Config | Any) -> list[tuple[float, float]]:
     """The actuator response points ``[(Hz, dB), ...]`` to equalise for.
 
     An explicit ``actuator.response`` wins; else the points of ``actuator.profile``;
     else (profile null) an empty list (flat).
     """
-    actuator = config.section("actuator")
-    if actuator.get("response") is not None:
-        return [(float(hz), float(db)) for hz, db in actuator["response"]]
-    if actuator.get("profile") is None:
+    actuator = settings_of(config).actuator
+    if actuator.response is not None:
+        return [(float(hz), float(db)) for hz, db in actuator.response]
+    if actuator.profile is None:
         return []
-    return [(float(hz), float(db)) for hz, db in load_actuator_profile(actuator["profile"])["response"]]
+    return [(float(hz), float(db)) for hz, db in load_actuator_profile(actuator.profile)["response"]]

@@ -6,7 +6,7 @@ Parsed once at start-up from the config; the compiled receive loop checks the ne
 from __future__ import annotations
 
 import ipaddress
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 
 from vibsynth.errors import ConfigError
 
@@ -73,7 +73,7 @@ class AllowList:
         self.networks = tuple(networks)
         self._cache: dict[str, bool] = {}
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[Network]:
         return iter(self.networks)
 
     def __len__(self) -> int:
@@ -83,7 +83,7 @@ class AllowList:
         return f"AllowList({', '.join(str(n) for n in self.networks)})"
 
     def __contains__(self, host: object) -> bool:
-        hit = self._cache.get(host)  # type: ignore[arg-type]
+        hit = self._cache.get(str(host))
         if hit is None:
             hit = self._check(str(host))
             if len(self._cache) < self._CACHE_MAX:

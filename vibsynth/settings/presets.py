@@ -22,11 +22,8 @@ changed, with bounded work per poll (see docs/presets.md, "Hot reload").
 
 from __future__ import annotations
 
-import difflib
 import logging
-import math
 import os
-import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -35,25 +32,47 @@ from typing import Any
 from vibsynth.errors import PresetError
 from vibsynth.formats.files import MAX_YAML_BYTES, atomic_write
 from vibsynth.formats.yamlio import dump_yaml
-from vibsynth.settings.yamldoc import YamlDocument, parse_yaml, read_yaml_file, short_repr
+from vibsynth.settings.fields import show
+from vibsynth.settings.models_preset import (
+    BALANCE_LIMIT,
+    GLIDE_MAX_MS,
+    MAX_DESCRIPTION,
+    MAX_TAGS,
+    NAME_PATTERN,
+    PRESET_VERSION,
+    TAG_PATTERN,
+    PresetModel,
+)
+from vibsynth.settings.validation import InvalidPresetError, model_spec, validate
+from vibsynth.settings.yamldoc import YamlDocument, parse_yaml, read_yaml_file
+
+__all__ = [
+    "BALANCE_LIMIT",
+    "GLIDE_MAX_MS",
+    "MAX_DESCRIPTION",
+    "MAX_PRESET_BYTES",
+    "MAX_TAGS",
+    "MIGRATIONS",
+    "NAME_PATTERN",
+    "SCHEMA_VERSION",
+    "SUFFIX",
+    "TAG_PATTERN",
+    "WHAT",
+    "Preset",
+    "load_preset",
+    "migrate",
+    "parse_preset",
+    "preset_to_yaml",
+    "save_preset",
+]
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 1
-#: Presets may hold balances beyond the database's +-1 (recordings outside it), up to this.
-BALANCE_LIMIT = 4.0
-GLIDE_MAX_MS = 10_000.0
-NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"
-TAG_PATTERN = r"[A-Za-z0-9][A-Za-z0-9 _.-]{0,31}"
-MAX_TAGS = 16
-MAX_DESCRIPTION = 4000
+SCHEMA_VERSION = PRESET_VERSION
 SUFFIX = ".yaml"
 WHAT = "a preset"
 #: Preset files over this size are never read (a preset is about 1.5 KB).
 MAX_PRESET_BYTES = MAX_YAML_BYTES
-
-_KEY_ORDER = ("version", "name", "description", "intensity", "balance", "glide_ms", "program", "tags", "provenance")
-_REQUIRED = ("intensity", "balance")
 
 
 @dataclass(frozen=True)
@@ -158,124 +177,38 @@ def migrate(data: dict[str, Any], *, origin: str = "preset") -> dict[str, Any]:
     return data
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def _show(value: Any) -> str:
-    if isinstance(value, bool) or value is None:
-        return {True: "true", False: "false", None: "null"}[value]
-    return short_repr(value)
-
-
-def _check_number(
-    where: str,
-    key: str,
-    value: Any,
-    low: float,
-    high: float,
-    *,
-    integer: bool = False,
-    unit: str = "",
-    nullable: bool = False,
-) -> float | None:
-    rng = f"[{low:g}, {high:g}]" + (f" {unit}" if unit else "")
-    allowed = ("an integer" if integer else "a number") + f" in {rng}" + (" or null" if nullable else "")
-    if value is None and nullable:
-        return None
-    if not _is_number(value) or (integer and not float(value).is_integer()):
-        raise PresetError(f"{where}: {key} = {_show(value)}: must be {allowed.split(' in ')[0]} (allowed: {allowed})")
-    v = float(value)
-    if not math.isfinite(v):
-        raise PresetError(f"{where}: {key} = {_show(value)}: must be finite (allowed: {allowed})")
-    if not low <= v <= high:
-        raise PresetError(f"{where}: {key} = {_show(value)}: outside the allowed range {rng}")
-    return v
-
-
 def _validate(data: Any, doc: YamlDocument, stem: str | None) -> Preset:
+    """Check a preset document against :class:`~vibsynth.settings.models_preset.PresetModel` (after migration)."""
     origin = doc.origin
-
-    def at(key: str) -> str:
-        return doc.where((key,))
-
+    spec = model_spec(PresetModel)
     if not isinstance(data, dict):
         raise PresetError(
-            f"{doc.where(())}: a preset must be a mapping of keys ({', '.join(_KEY_ORDER)}), got {_show(data)}"
+            f"{doc.where(())}: a preset must be a mapping of keys ({', '.join(spec.sections[''])}), got {show(data)}"
         )
-    for key in data:
-        if key not in _KEY_ORDER:
-            near = difflib.get_close_matches(str(key), _KEY_ORDER, n=1, cutoff=0.6)
-            hint = f"; did you mean {near[0]!r}?" if near else ""
-            raise PresetError(f"{at(str(key))}: unknown key {key!r}{hint} (allowed: {', '.join(_KEY_ORDER)})")
-    data = migrate(dict(data), origin=at("version") if "version" in data else origin)
-    for key in _REQUIRED:
-        if key not in data:
-            allowed = (
-                "a number in [0, 1]" if key == "intensity" else f"a number in [{-BALANCE_LIMIT:g}, {BALANCE_LIMIT:g}]"
-            )
-            raise PresetError(f"{origin}: missing key {key!r} (allowed: {allowed})")
-
-    name = data.get("name", stem)
+    try:  # an unknown key is reported before anything about the version (it may be a misspelt one)
+        validate(spec, {k: v for k, v in data.items() if k != "version"}, doc, PresetError)
+    except InvalidPresetError as exc:
+        if any(p.message.startswith("unknown key") for p in exc.problems):
+            raise
+    data = migrate(dict(data), origin=doc.where(("version",)) if "version" in data else origin)
+    model: PresetModel = validate(spec, data, doc, PresetError)
+    name = model.name if model.name is not None else stem
     if name is None:
         raise PresetError(f"{origin}: missing key 'name'")
-    if not isinstance(name, str) or not re.fullmatch(NAME_PATTERN, name):
-        raise PresetError(
-            f"{at('name')}: name = {_show(name)}: must be 1-64 letters, digits, '.', '_' or '-', "
-            "starting with a letter or digit"
-        )
     if stem is not None and name != stem:
         raise PresetError(
-            f"{at('name')}: name = {name!r} does not match the file name {stem}{SUFFIX} "
+            f"{doc.where(('name',))}: name = {name!r} does not match the file name {stem}{SUFFIX} "
             f"(rename the file or change the name)"
-        )
-
-    description = data.get("description", "")
-    if description is None:
-        description = ""
-    if not isinstance(description, str):
-        raise PresetError(f"{at('description')}: description = {_show(description)}: must be text (a string)")
-    if len(description) > MAX_DESCRIPTION:
-        raise PresetError(
-            f"{at('description')}: description is {len(description)} characters long "
-            f"(allowed: at most {MAX_DESCRIPTION})"
-        )
-
-    intensity = _check_number(at("intensity"), "intensity", data["intensity"], 0.0, 1.0)
-    balance = _check_number(
-        at("balance"), "balance", data["balance"], -BALANCE_LIMIT, BALANCE_LIMIT, unit="(knob units)"
-    )
-    glide = _check_number(at("glide_ms"), "glide_ms", data.get("glide_ms"), 0.0, GLIDE_MAX_MS, unit="ms", nullable=True)
-    program = _check_number(at("program"), "program", data.get("program"), 0, 127, integer=True, nullable=True)
-
-    tags = data.get("tags") or []
-    if isinstance(tags, str):
-        raise PresetError(f"{at('tags')}: tags = {tags!r}: must be a list, e.g. tags: [{tags}]")
-    if not isinstance(tags, list):
-        raise PresetError(f"{at('tags')}: tags = {_show(tags)}: must be a list of short words")
-    if len(tags) > MAX_TAGS:
-        raise PresetError(f"{at('tags')}: {len(tags)} tags (allowed: at most {MAX_TAGS})")
-    for i, tag in enumerate(tags):
-        if not isinstance(tag, str) or not re.fullmatch(TAG_PATTERN, tag):
-            raise PresetError(
-                f"{doc.where(('tags', str(i)))}: tags[{i}] = {_show(tag)}: must be 1-32 letters, "
-                "digits, spaces, '.', '_' or '-'"
-            )
-
-    provenance = data.get("provenance") or {}
-    if not isinstance(provenance, dict):
-        raise PresetError(
-            f"{at('provenance')}: provenance = {_show(provenance)}: must be a mapping (e.g. recording: file.wav)"
         )
     return Preset(
         name=name,
-        intensity=float(intensity),  # type: ignore[arg-type]
-        balance=float(balance),  # type: ignore[arg-type]
-        description=description.strip(),
-        glide_ms=glide,
-        program=None if program is None else int(program),
-        tags=tuple(tags),
-        provenance=provenance,
+        intensity=float(model.intensity),
+        balance=float(model.balance),
+        description=(model.description or "").strip(),
+        glide_ms=None if model.glide_ms is None else float(model.glide_ms),
+        program=model.program,
+        tags=tuple(model.tags or ()),
+        provenance=data.get("provenance") or {},
         version=SCHEMA_VERSION,
     )
 

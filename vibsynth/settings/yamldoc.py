@@ -34,13 +34,18 @@ class YamlDocument:
     lines: dict[Path_, int]
     origin: str
 
-    def where(self, path: Path_) -> str:
-        """``origin:line`` of the deepest known prefix of ``path`` (``origin`` alone if unknown)."""
+    def line(self, path: Path_) -> int | None:
+        """1-based line of the deepest known prefix of ``path`` (None if none is known)."""
         for n in range(len(path), 0, -1):
             line = self.lines.get(tuple(str(p) for p in path[:n]))
             if line is not None:
-                return f"{self.origin}:{line}"
-        return self.origin
+                return line
+        return None
+
+    def where(self, path: Path_) -> str:
+        """``origin:line`` of the deepest known prefix of ``path`` (``origin`` alone if unknown)."""
+        line = self.line(path)
+        return self.origin if line is None else f"{self.origin}:{line}"
 
 
 def _walk_lines(node: yaml.Node, path: Path_, lines: dict[Path_, int], origin: str) -> None:

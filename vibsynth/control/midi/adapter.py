@@ -15,6 +15,8 @@ from vibsynth.control.midi.learn_store import user_config_path
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import VIRTUAL_PORT_NAME, MidiServer, _one_line, resolve_port_name, running_servers
 from vibsynth.errors import DeviceError
+from vibsynth.settings.cli_args import flag_type
+from vibsynth.settings.config import settings_of
 
 log = logging.getLogger(__name__)
 
@@ -25,6 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--midi",
         metavar="NAME|INDEX",
+        type=flag_type("midi.port"),
         default=None,
         help="open this MIDI input (name substring or index from `vibsynth devices`)",
     )
@@ -73,16 +76,16 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
         The ``midi:`` section is invalid.
     """
     data = config.data
-    section = data.get("midi") or {}
-    if getattr(args, "no_midi", False) or not section.get("enabled", True):
+    section = settings_of(config).midi
+    if getattr(args, "no_midi", False) or not section.enabled:
         log.info(
             "running without MIDI: disabled (%s)",
             "--no-midi" if getattr(args, "no_midi", False) else "midi.enabled is false",
         )
         return None
     port = getattr(args, "midi", None)
-    port = section.get("port") if port is None else port
-    virtual = bool(getattr(args, "midi_virtual", False) or (port is None and section.get("virtual", False)))
+    port = section.port if port is None else port
+    virtual = bool(getattr(args, "midi_virtual", False) or (port is None and section.virtual))
     if port is None and not virtual:
         log.warning("running without MIDI: no input chosen (use --midi NAME|INDEX or --midi-virtual)")
         return None
@@ -104,7 +107,7 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
         port=port,
         virtual=virtual,
         config_path=user_config_path(getattr(args, "config", None)),
-        reconnect_interval_s=float(section.get("reconnect_interval_s", 1.0) or 1.0),
+        reconnect_interval_s=section.reconnect_interval_s,
         tap=getattr(controller, "tap", None),
     )
     if getattr(args, "learn", None):
