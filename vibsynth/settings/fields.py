@@ -17,7 +17,7 @@ import math
 import re
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer
 from pydantic_core import PydanticCustomError
 
 from vibsynth.settings.yamldoc import short_repr
@@ -25,6 +25,7 @@ from vibsynth.settings.yamldoc import short_repr
 __all__ = [
     "SettingsModel",
     "Section",
+    "ValueModel",
     "setting",
     "problem",
     "cross_problem",
@@ -58,6 +59,16 @@ class SettingsModel(BaseModel):
 
 class Section(SettingsModel):
     """A section of the config file: its keys merge one by one across layers (a leaf is replaced whole)."""
+
+
+class ValueModel(SettingsModel):
+    """A structured value inside one key (a MIDI binding, a layout position): optional keys left out
+    are dumped as absent, not ``null``, so ``model_dump()`` gives back what a file would hold."""
+
+    @model_serializer(mode="wrap")
+    def _without_nulls(self, handler: SerializerFunctionWrapHandler) -> Any:
+        data = handler(self)
+        return {k: v for k, v in data.items() if v is not None} if isinstance(data, dict) else data
 
 
 def setting(

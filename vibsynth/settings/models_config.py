@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BeforeValidator, ConfigDict, Field, ValidationInfo, model_validator
 
-from vibsynth.settings.fields import Section, SettingsModel, cross_problem, problem, setting
+from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.values import (
     CC_MAX,
     MIDI_CHANNELS,
@@ -195,7 +195,7 @@ class Osc(Section):
     )
 
 
-class MidiBinding(SettingsModel):
+class MidiBinding(ValueModel):
     """One MIDI controller bound to a knob: ``{cc: 74}`` or ``{nrpn: [1, 1]}``, optional channel, invert, range."""
 
     model_config = ConfigDict(json_schema_extra={"oneOf": [{"required": ["cc"]}, {"required": ["nrpn"]}]})
@@ -217,7 +217,7 @@ _BINDINGS_ALLOWED = (
 )
 
 
-class NrpnNumbers(SettingsModel):
+class NrpnNumbers(ValueModel):
     """``midi.nrpn``: the NRPN numbers of the two knobs (a knob left out has none)."""
 
     intensity: _Nrpn | None = setting(None, "NRPN number of intensity")
@@ -286,6 +286,7 @@ class Speed(Section):
         [[0, 0.0], [10, 0.35], [50, 0.6], [150, 0.85], [300, 1.0]],
         "[mm/s, intensity] points, linear between them",
         allowed=SPEED_POINTS.allowed(),
+        min_length=SPEED_POINTS.min_points,
     )
     balance_per_decade: float = setting(
         0.0,
@@ -303,7 +304,7 @@ class Presets(Section):
     watch: bool = setting(True, "hot reload while serving")
 
 
-class ChannelPosition(SettingsModel):
+class ChannelPosition(ValueModel):
     """Where one output channel's actuator sits on the body (``layout:``), in metres."""
 
     x: float = setting(..., "position, left (-) to right (+)", unit="m", ge=-10, le=10)

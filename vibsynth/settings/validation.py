@@ -391,13 +391,11 @@ def _one(
     else:
         schema = sub_schema if real else leaf.schema
         if kind == "extra_forbidden" and real:  # a key inside a structured value (a layout position)
-            name = str(real[-1])
             holder = _get(value, real[:-1])
-            shown, path = _display(leaf_key, real[:-1], value), path[:-1]
             known = list(holder.keys()) if isinstance(holder, dict) else []
             props = resolve(_walk(value, leaf.schema, real[:-1], spec.defs)[1], spec.defs).get("properties", {})
             allowed_keys = ", ".join(props) if props else ", ".join(str(k) for k in known)
-            return _problem(shown, f"unknown key {name!r} (allowed: {allowed_keys})", holder, path, locate, plain=True)
+            return _problem(shown, f"unknown key {shown!r} (allowed: {allowed_keys})", sub_value, path, locate)
         why = explain(schema, sub_value, spec.defs, unit=leaf.schema.get("x-unit") if not real else None)
         allowed = describe(schema, spec.defs)
         if why is None:  # pydantic's own words, e.g. for a rule the schema does not state
