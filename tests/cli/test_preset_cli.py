@@ -60,7 +60,7 @@ def test_list_table_and_json(capsys):
     code, out, _ = run(capsys, "preset", "list")
     assert code == 0
     header = out.splitlines()[0].split()
-    assert header == ["NAME", "INTENSITY", "BALANCE", "PROGRAM", "FROM", "TAGS"]
+    assert header == ["name", "intensity", "balance", "program", "from", "tags"]
     assert "towel" in out and "brick" in out
     code, out, _ = run(capsys, "preset", "list", "--json", "--sort", "balance")
     data = json.loads(out)
@@ -108,7 +108,7 @@ def test_new_then_override_and_force(capsys, isolated):
     p = load_preset(isolated / "mine.yaml")
     assert (p.balance, p.intensity, p.tags, p.program, p.glide_ms) == (0.5, 0.25, ("soft", "test"), 100, 80.0)
     code, _, err = run(capsys, "preset", "new", "mine", "--balance", "0", "--intensity", "0")
-    assert code == 2 and "exists already (use --force" in err
+    assert code == 1 and "exists already (use --force" in err  # a file in the way: a runtime error
     code, _, err = run(capsys, "preset", "new", "brick", "--like", "brick", "--intensity", "0.1")
     assert code == 0 and "overrides the shipped preset" in err
     _, out, _ = run(capsys, "preset", "show", "brick")
@@ -136,8 +136,10 @@ def test_new_needs_values(capsys):
 
 
 def test_new_bad_name(capsys):
-    code, _, err = run(capsys, "preset", "new", "a/b", "--balance", "0", "--intensity", "0.5")
-    assert code == 2 and "must be 1-64 letters" in err
+    with pytest.raises(SystemExit) as info:  # refused by the argument parser, before anything is read
+        main(["preset", "new", "a/b", "--balance", "0", "--intensity", "0.5"])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and "must be 1-64 letters" in err and err.count("\n") == 1
 
 
 def _texture(basis, rng, *, balance: float, knob: float, seconds: float = 3.0) -> np.ndarray:
@@ -235,14 +237,14 @@ def test_from_recording_bad_input(capsys, tmp_path, content, message):
     if content is not None:
         path.write_bytes(content)
     code, _, err = run(capsys, "preset", "from-recording", str(path))
-    assert code == 2 and message in err
+    assert code == 1 and message in err  # a bad file: a runtime error
 
 
 def test_from_recording_silent(capsys, tmp_path):
     path = tmp_path / "silence.wav"
     write_wav(path, np.zeros(int(FS)), FS)
     code, _, err = run(capsys, "preset", "from-recording", str(path))
-    assert code == 2 and "silence.wav" in err and "silent" in err
+    assert code == 1 and "silence.wav" in err and "silent" in err
 
 
 def test_play_to_wav_renders_the_preset(capsys, tmp_path, basis):
@@ -262,3 +264,43 @@ def test_play_unknown_preset(capsys, tmp_path):
     code, _, err = run(capsys, "preset", "play", "nope", "-o", str(tmp_path / "x.wav"))
     assert code == 2 and "unknown preset 'nope'" in err
     assert not (tmp_path / "x.wav").exists()
+
+
+def test_validate_names_every_bad_file_and_passes_good_ones(capsys, tmp_path):
+    good, bad, yaml_error = tmp_path / "good.yaml", tmp_path / "bad.yaml", tmp_path / "typo.yaml"
+    good.write_text("version: 1\nintensity: 0.5\nbalance: 0.2\n")
+    bad.write_text("version: 1\nintensity: 0.5\nbalance: 9\n")
+    yaml_error.write_text("version: 1\nintensity: 0.5\nbalance: [0.2\n")
+    code, out, err = run(capsys, "preset", "validate", str(good))
+    assert code == 0 and f"{good}: OK (good: intensity 0.500, balance +0.200)" in out
+    code, out, err = run(capsys, "preset", "validate", str(good), str(bad), str(yaml_error))
+    lines = err.splitlines()
+    assert code == 1 and f"{good}: OK" in out
+    assert lines[0].startswith(f"vibsynth: error: {bad}:3: balance = 9: outside the allowed range")
+    assert lines[1].startswith(f"vibsynth: error: {yaml_error}:4") and "YAML syntax error" in lines[1]
+    assert lines[2] == "2 of 3 preset files are invalid"
+
+
+def test_a_broken_user_preset_says_what_is_wrong_everywhere(capsys, isolated, caplog):
+    """Not "unknown preset": the file's own error, with file and line, for show and play alike."""
+    isolated.mkdir(parents=True)
+    (isolated / "mybrick.yaml").write_text("version: 1\nintensity: 0.5\nbalance: [0.2\n")
+    for argv in (["preset", "show", "mybrick"], ["preset", "play", "mybrick", "-o", str(isolated / "x.wav")]):
+        code, _, err = run(capsys, *argv)
+        assert code == 1 and "unknown preset" not in err
+        assert err.strip().splitlines()[-1].startswith(f"vibsynth: error: {isolated / 'mybrick.yaml'}:4")
+    code, _, err = run(capsys, "preset", "show", "mybrik")
+    assert code == 2 and "unknown preset 'mybrik'" in err
+
+
+def test_rm_deletes_user_presets_only(capsys, isolated):
+    assert run(capsys, "preset", "new", "mine", "--intensity", "0.4", "--balance", "0")[0] == 0
+    code, out, _ = run(capsys, "preset", "rm", "mine")
+    assert code == 0 and f"removed {isolated / 'mine.yaml'}" in out and not (isolated / "mine.yaml").exists()
+    code, _, err = run(capsys, "preset", "rm", "brick")
+    assert code == 2 and "shipped presets are read-only" in err
+    assert run(capsys, "preset", "new", "brick", "--intensity", "0.4", "--balance", "0")[0] == 0  # an override
+    code, out, _ = run(capsys, "preset", "rm", "brick")
+    assert code == 0 and "the shipped preset of that name is used again" in out
+    code, _, err = run(capsys, "preset", "rm", "nothing-like-it")
+    assert code == 2 and "unknown preset" in err

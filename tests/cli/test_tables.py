@@ -14,7 +14,7 @@ from vibsynth.cli import main
 from vibsynth.cli._inputs import MAX_FILES, expand_recordings, wav_channel
 from vibsynth.cli._table import Column, elide_middle, emit, format_table, output_format
 from vibsynth.dsp.synthesis import synthesize
-from vibsynth.errors import InputError
+from vibsynth.errors import InputError, ParameterError
 from vibsynth.formats.recordings import write_wav
 
 COLUMNS = (Column("file", "file", name=True), Column("x", "value", lambda v: f"{v:.2f}"))
@@ -68,7 +68,7 @@ def test_recursive_folders_are_sorted_and_bounded(tmp_path, monkeypatch):
         (tmp_path / rel).write_text("")
     found = expand_recordings([tmp_path], recursive=True)
     assert [p.relative_to(tmp_path).as_posix() for p in found] == ["a/0.wav", "a/deep/1.csv", "b/2.wav"]
-    with pytest.raises(InputError, match="is a folder"):
+    with pytest.raises(ParameterError, match="is a folder"):
         expand_recordings([tmp_path], recursive=False)
     with pytest.raises(InputError, match="no such file or folder"):
         expand_recordings([tmp_path / "nothing"], recursive=True)

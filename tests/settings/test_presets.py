@@ -211,7 +211,7 @@ def test_broken_file_at_startup_is_reported_not_fatal(dirs, caplog):
     shipped, user = dirs
     user.mkdir()
     (user / "bad.yaml").write_text("intensity: 2\nbalance: 0\n")
-    with caplog.at_level(logging.ERROR, logger="vibsynth.settings"):
+    with caplog.at_level(logging.WARNING, logger="vibsynth.settings"):
         lib = PresetLibrary(shipped, user)
     assert "bad" not in lib
     assert "bad.yaml:1: intensity = 2" in lib.errors[str(user / "bad.yaml")]
@@ -264,7 +264,7 @@ def test_watcher_edit_break_fix_delete(dirs, caplog):
     save_preset(Preset("mine", 0.3, 0.1), target)
     lib = PresetLibrary(shipped, user)
     rec = Recorder()
-    with caplog.at_level(logging.ERROR, logger="vibsynth.settings"), PresetWatcher(lib, rec, interval_s=0.05):
+    with caplog.at_level(logging.WARNING, logger="vibsynth.settings"), PresetWatcher(lib, rec, interval_s=0.05):
         edit(target, "version: 1\nintensity: 0.6\nbalance: 0.1\n")  # edit
         assert rec.wait() == ["mine"] and lib.get("mine").intensity == 0.6
 
@@ -329,7 +329,7 @@ def test_callback_errors_do_not_stop_the_watcher(dirs, caplog):
     watcher = PresetWatcher(lib, flaky)
     save_preset(Preset("one", 0.5, 0.0), user / "one.yaml")
     save_preset(Preset("two", 0.5, 0.0), user / "two.yaml")
-    with caplog.at_level(logging.ERROR, logger="vibsynth.settings"):
+    with caplog.at_level(logging.WARNING, logger="vibsynth.settings"):
         assert watcher.poll() == {"one": "added", "two": "added"}
     assert seen == ["one", "two"] and "on_change callback failed" in caplog.text
 

@@ -5,8 +5,14 @@ Sub-commands live in their own modules in this package; each defines
 parser whose ``func`` default takes the parsed arguments and returns an exit code.
 Modules are discovered automatically, so adding a command touches no shared file.
 
-Errors raised on purpose (:class:`~vibsynth.errors.VibsynthError`) print one line
-``vibsynth: error: ...`` and exit with code 2; nothing prints a traceback.
+Every error prints one line ``vibsynth: error: ...`` on stderr, never a traceback:
+
+* a bad argument (argparse, or :class:`~vibsynth.errors.ParameterError` raised while checking
+  arguments) exits with :data:`EXIT_USAGE` (2);
+* anything that goes wrong at run time (a bad or missing file, a device, a refused write, an
+  unexpected failure) exits with :data:`EXIT_RUNTIME` (1). An unexpected exception says so and
+  how to get the traceback (``-vv``);
+* a closed pipe (``vibsynth ... | head``) ends the command quietly.
 """
 
 from __future__ import annotations
@@ -14,16 +20,21 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import pkgutil
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from vibsynth import __version__
-from vibsynth.errors import VibsynthError
+from vibsynth.errors import ConfigError, ParameterError, VibsynthError
 
-__all__ = ["main", "build_parser", "EXIT_USAGE"]
+__all__ = ["main", "build_parser", "EXIT_USAGE", "EXIT_RUNTIME"]
 
 EXIT_USAGE = 2
+EXIT_RUNTIME = 1
+
+log = logging.getLogger("vibsynth")
 
 DESCRIPTION = """\
 vibsynth: haptic texture synthesis from two perceptual knobs.
@@ -51,11 +62,16 @@ def _subcommand_modules() -> list:
     return sorted(modules, key=lambda m: (getattr(m, "ORDER", 100), m.__name__))
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``vibsynth: error: <what> (see vibsynth render --help)``."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"vibsynth: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with every discovered sub-command."""
-    parser = argparse.ArgumentParser(
-        prog="vibsynth", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = _Parser(prog="vibsynth", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"vibsynth {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -64,22 +80,66 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _LineFormatter(logging.Formatter):
+    """``vibsynth: warning: ...``: log lines look like the CLI's own messages."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return f"vibsynth: {record.levelname.lower()}: {record.getMessage()}"
+
+
+def _error(message: str) -> None:
+    print(f"vibsynth: error: {message}", file=sys.stderr)
+
+
+def _quiet_closed_pipe() -> None:
+    """stdout's reader went away (``| head``): drop what is left instead of a BrokenPipeError at exit."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``vibsynth`` console script; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
     level = logging.WARNING if args.verbose == 0 else logging.INFO if args.verbose == 1 else logging.DEBUG
-    logging.basicConfig(level=level, format="vibsynth: %(levelname)s: %(message)s")
+    handler = logging.StreamHandler()
+    handler.setFormatter(_LineFormatter())
+    logging.basicConfig(level=level, handlers=[handler])
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USAGE
     try:
-        return int(args.func(args) or 0)
-    except VibsynthError as exc:
-        print(f"vibsynth: error: {exc}", file=sys.stderr)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()
+        return code
+    except ParameterError as exc:
+        _error(str(exc))
         return EXIT_USAGE
+    except argparse.ArgumentTypeError as exc:  # an argument type checked after parsing
+        _error(str(exc))
+        return EXIT_USAGE
+    except ConfigError as exc:  # a value given with --set or a flag is a usage error; a file's, a runtime one
+        _error(str(exc))
+        return EXIT_USAGE if str(exc).startswith("command line:") else EXIT_RUNTIME
+    except VibsynthError as exc:
+        _error(str(exc))
+        return EXIT_RUNTIME
+    except BrokenPipeError:
+        _quiet_closed_pipe()
+        return EXIT_RUNTIME
     except KeyboardInterrupt:
         return 130
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        _error(f"{where}{exc.strerror or exc}")
+        return EXIT_RUNTIME
+    except Exception as exc:  # the last line of defence: one line, the traceback only on request
+        log.debug("unexpected failure", exc_info=True)
+        _error(f"unexpected {type(exc).__name__}: {exc} (a bug: please report it; -vv shows the traceback)")
+        return EXIT_RUNTIME
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -7,7 +7,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from vibsynth.errors import InputError
+from vibsynth.errors import InputError, ParameterError
 from vibsynth.formats.recordings import RECORDING_SUFFIXES
 
 __all__ = ["add_recursive_argument", "expand_recordings", "wav_channel", "MAX_FILES"]
@@ -31,16 +31,17 @@ def expand_recordings(paths: Sequence[str | os.PathLike[str]], *, recursive: boo
 
     Raises
     ------
+    ParameterError
+        A folder without ``recursive`` (a usage error).
     InputError
-        A folder without ``recursive``, a folder with no recordings, a missing path, or more
-        than :data:`MAX_FILES` recordings.
+        A folder with no recordings, a missing path, or more than :data:`MAX_FILES` recordings.
     """
     out: list[Path] = []
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
             if not recursive:
-                raise InputError(f"{path}: is a folder (add --recursive to take the recordings under it)")
+                raise ParameterError(f"{path}: is a folder (add --recursive to take the recordings under it)")
             found = []
             for folder, dirs, files in os.walk(path):
                 dirs.sort()

@@ -10,6 +10,7 @@ from typing import Any
 
 import yaml
 
+from vibsynth.errors import ConfigError, ParameterError
 from vibsynth.settings.actuators import resolve_actuator_response
 from vibsynth.settings.config import (
     ENV_VARS,
@@ -34,7 +35,10 @@ def cmd_show(args: argparse.Namespace) -> int:
     if args.key:
         leaves = {k: v for k, v in leaves.items() if k == args.key or k.startswith(args.key + ".")}
         if not leaves:
-            config.get(args.key)  # raises with a "did you mean"
+            try:
+                config.get(args.key)  # raises with a "did you mean"
+            except ConfigError as exc:
+                raise ParameterError(str(exc)) from None  # a key typed on the command line
     if args.json:
         print(
             json.dumps(

@@ -1,4 +1,9 @@
-"""``vibsynth preset list|show|new|from-recording|play``: the designer's preset workflow."""
+"""``vibsynth preset list|show|new|from-recording|play|validate|rm``: the designer's preset workflow.
+
+A broken preset file is reported the same way everywhere (``serve``, ``render --midi``, every
+``preset`` command): one warning naming file:line when the library is read, and, when that
+preset is asked for by name, an error with the same text.
+"""
 
 from __future__ import annotations
 
@@ -7,16 +12,20 @@ import hashlib
 import json
 import logging
 import math
+import re
 import sys
 from pathlib import Path
 from typing import Any
 
 from vibsynth import __version__
-from vibsynth.errors import PresetError
+from vibsynth.cli._inputs import wav_channel
+from vibsynth.cli._table import Column, add_format_argument, emit, output_format
+from vibsynth.errors import ParameterError, PresetError
 from vibsynth.settings.cli_args import flag_type
 from vibsynth.settings.config import Config, add_config_arguments, config_from_args
-from vibsynth.settings.library import PresetLibrary, load_library
+from vibsynth.settings.library import PresetLibrary, UnknownPresetError, load_library
 from vibsynth.settings.models import PresetModel
+from vibsynth.settings.models_preset import NAME_PATTERN, NAME_RULE
 from vibsynth.settings.presets import BALANCE_LIMIT, Preset, preset_to_yaml
 
 __all__ = ["ORDER", "register"]
@@ -46,15 +55,25 @@ def _tags(text: str) -> list[str]:
 # --------------------------------------------------------------------------- helpers
 def _library(args: argparse.Namespace) -> tuple[Config, PresetLibrary]:
     config = config_from_args(args)
-    library = load_library(config)
-    for _path, message in library.errors.items():
-        print(f"vibsynth: warning: {message}", file=sys.stderr)
-    return config, library
+    return config, load_library(config)  # the library warns once about each broken file
 
 
-def _fmt_table(rows: list[list[str]]) -> str:
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows)
+def _get(library: PresetLibrary, name: str) -> Preset:
+    """The preset named on the command line: an unknown name is a usage error, a broken file a runtime one."""
+    try:
+        return library.get(name)
+    except UnknownPresetError as exc:
+        raise ParameterError(str(exc)) from None
+
+
+LIST_COLUMNS = (
+    Column("name", "name", name=True),
+    Column("intensity", "intensity", lambda v: f"{v:.3f}"),
+    Column("balance", "balance", lambda v: f"{v:+.3f}"),
+    Column("program", "program", lambda v: v),
+    Column("origin", "from", name=True),
+    Column("tags", "tags", lambda v: ", ".join(v), name=True),
+)
 
 
 def _write_new(library: PresetLibrary, preset: Preset, output: Path | None, force: bool) -> Path:
@@ -68,6 +87,21 @@ def _write_new(library: PresetLibrary, preset: Preset, output: Path | None, forc
     return library.save_user(preset, overwrite=force)
 
 
+def preset_name(text: str) -> str:
+    """An argparse type: a preset name (it becomes a file name, so no folders, no dots first)."""
+    if not re.fullmatch(NAME_PATTERN, text):
+        raise argparse.ArgumentTypeError(f"preset name {text!r}: must be {NAME_RULE}")
+    return text
+
+
+def _typed_preset(**fields: Any) -> Preset:
+    """A preset from values typed on the command line: a refused value is a usage error."""
+    try:
+        return Preset(**fields)
+    except PresetError as exc:
+        raise ParameterError(str(exc)) from None
+
+
 # --------------------------------------------------------------------------- commands
 def cmd_list(args: argparse.Namespace) -> int:
     _, library = _library(args)
@@ -75,7 +109,8 @@ def cmd_list(args: argparse.Namespace) -> int:
     presets = library.presets()
     if args.tag:
         presets = [p for p in presets if args.tag in p.tags]
-    if args.json:
+    fmt = output_format(args)
+    if fmt == "json":
         print(
             json.dumps(
                 [
@@ -90,22 +125,69 @@ def cmd_list(args: argparse.Namespace) -> int:
         presets.sort(key=lambda p: p.balance)
     elif args.sort == "program":
         presets.sort(key=lambda p: programs.get(p.name, 999))
-    rows = [["NAME", "INTENSITY", "BALANCE", "PROGRAM", "FROM", "TAGS"]]
+    rows: list[dict[str, Any]] = []
     for p in presets:
         number = programs.get(p.name)
         prog = "-" if number is None else (str(number) if p.program is not None else f"{number}*")
-        rows.append([p.name, f"{p.intensity:.3f}", f"{p.balance:+.3f}", prog, p.origin, ", ".join(p.tags)])
-    print(_fmt_table(rows))
+        rows.append(
+            {
+                "name": p.name,
+                "intensity": p.intensity,
+                "balance": p.balance,
+                "program": prog,
+                "origin": p.origin,
+                "tags": list(p.tags),
+            }
+        )
+    if fmt == "csv":
+        emit([dict(r, tags=";".join(r["tags"])) for r in rows], LIST_COLUMNS, "csv")
+        return 0
+    emit(rows, LIST_COLUMNS, "table")
     print(
         f"\n{len(presets)} presets; user folder: {library.user_dir}"
-        + ("; * = program by name order (no program: field)" if any(r[3].endswith("*") for r in rows[1:]) else "")
+        + ("; * = program by name order (no program: field)" if any(r["program"].endswith("*") for r in rows) else "")
     )
+    return 0
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    """Check preset files the way the library reads them; one line per file, exit 1 if any is bad."""
+    from vibsynth.settings.presets import load_preset
+
+    bad = 0
+    for path in args.files:
+        try:
+            preset = load_preset(path)
+        except PresetError as exc:
+            bad += 1
+            print(f"vibsynth: error: {exc}", file=sys.stderr)
+        else:
+            print(f"{path}: OK ({preset.name}: intensity {preset.intensity:.3f}, balance {preset.balance:+.3f})")
+    if bad and len(args.files) > 1:
+        print(f"{bad} of {len(args.files)} preset files are invalid", file=sys.stderr)
+    return 1 if bad else 0
+
+
+def cmd_rm(args: argparse.Namespace) -> int:
+    """Delete a user preset's file (shipped presets are read-only); a broken file can be removed too."""
+    _, library = _library(args)
+    user_dir = library.user_dir
+    candidates = [] if user_dir is None else [user_dir / f"{args.name}.yaml"]
+    target = next((c for c in candidates if c.is_file()), None)
+    if target is None:
+        if args.name in library and library.get(args.name).origin == "shipped":
+            raise ParameterError(f"{args.name!r} is a shipped preset: shipped presets are read-only")
+        _get(library, args.name)  # unknown: the usage error with "did you mean"
+        raise ParameterError(f"{args.name!r} has no file in the user folder {user_dir}")
+    target.unlink()
+    overridden = library.shipped_dir is not None and (library.shipped_dir / f"{args.name}.yaml").is_file()
+    print(f"removed {target}" + ("; the shipped preset of that name is used again" if overridden else ""))
     return 0
 
 
 def cmd_show(args: argparse.Namespace) -> int:
     _, library = _library(args)
-    preset = library.get(args.name)
+    preset = _get(library, args.name)
     if args.json:
         print(json.dumps({**preset.to_dict(), "origin": preset.origin, "path": str(preset.path)}, indent=2))
         return 0
@@ -118,7 +200,7 @@ def cmd_new(args: argparse.Namespace) -> int:
     _, library = _library(args)
     base: dict[str, Any] = {}
     if args.like:
-        template = library.get(args.like)
+        template = _get(library, args.like)
         base = {
             "intensity": template.intensity,
             "balance": template.balance,
@@ -129,8 +211,8 @@ def cmd_new(args: argparse.Namespace) -> int:
     intensity = args.intensity if args.intensity is not None else base.get("intensity")
     balance = args.balance if args.balance is not None else base.get("balance")
     if intensity is None or balance is None:
-        raise PresetError("preset new: give --intensity I and --balance B (or --like NAME to start from a preset)")
-    preset = Preset(
+        raise ParameterError("preset new: give --intensity I and --balance B (or --like NAME to start from a preset)")
+    preset = _typed_preset(
         name=args.name,
         intensity=intensity,
         balance=balance,
@@ -206,7 +288,7 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
         "created_by": f"vibsynth {__version__} (preset from-recording)",
     }
     name = args.name or recording.path.stem
-    preset = Preset(
+    preset = _typed_preset(
         name=name,
         intensity=round(intensity, 4),
         balance=round(balance, 4),
@@ -232,7 +314,7 @@ def _preset_engine(config: Config, library: PresetLibrary, name: str) -> Any:
         from vibsynth.app.service import build_engine
     except ImportError as exc:  # pragma: no cover - service.py comes from another issue
         raise PresetError(f"preset play needs vibsynth.app.service.build_engine ({exc})") from None
-    preset = library.get(name)
+    preset = _get(library, name)
     engine = build_engine(config)
     knobs = config.section("knobs")
     controller = Controller(
@@ -258,7 +340,7 @@ def cmd_play(args: argparse.Namespace) -> int:
         device = int(device)
     config = config_from_args(args, extra={"audio.channels": args.channels, "audio.device": device})
     library = load_library(config)
-    preset = library.get(args.name)
+    preset = _get(library, args.name)
     if args.output is not None:
         from vibsynth.app.render import render
         from vibsynth.formats.wav_stream import WavStreamWriter, check_target
@@ -321,7 +403,7 @@ def register(subparsers: Any) -> None:
     add_config_arguments(p)
     p.add_argument("--sort", choices=("name", "balance", "program"), default="name")
     p.add_argument("--tag", help="only presets with this tag")
-    p.add_argument("--json", action="store_true", help="machine-readable output")
+    add_format_argument(p)
     p.set_defaults(func=cmd_list)
 
     p = sub.add_parser("show", help="print one preset (YAML) and its file")
@@ -340,7 +422,7 @@ def register(subparsers: Any) -> None:
 
     p = sub.add_parser("new", help="create a user preset")
     add_config_arguments(p)
-    p.add_argument("name")
+    p.add_argument("name", type=preset_name)
     p.add_argument("--balance", type=flag_type("balance", PresetModel), help="balance (knob units)")
     p.add_argument("--intensity", type=flag_type("intensity", PresetModel), help="intensity 0..1")
     p.add_argument("--like", metavar="PRESET", help="start from an existing preset's values")
@@ -350,9 +432,11 @@ def register(subparsers: Any) -> None:
     p = sub.add_parser("from-recording", help="analyse a recording and save it as a preset (with provenance)")
     add_config_arguments(p)
     p.add_argument("file", type=Path, help="recording: .wav, or .csv/.txt with --rate")
-    p.add_argument("--name", help="preset name (default: the file name)")
+    p.add_argument("--name", type=preset_name, help="preset name (default: the file name)")
     p.add_argument("--rate", type=_float_in(2400, 768000, " Hz"), help="sample rate of a CSV/TXT recording (Hz)")
-    p.add_argument("--channel", type=int, default=0, help="channel of a multi-channel WAV (0-based)")
+    p.add_argument(
+        "--channel", type=wav_channel, default=0, metavar="N", help="channel of a multi-channel WAV (1 = the first)"
+    )
     p.add_argument("--basis", type=Path, help="spectral basis YAML (default: the shipped basis)")
     add_common_new(p)
     p.set_defaults(func=cmd_from_recording)
@@ -366,6 +450,15 @@ def register(subparsers: Any) -> None:
     p.add_argument("--device", help="output device (name substring or index; default: audio.device)")
     p.add_argument("--channels", type=flag_type("audio.channels"), help="actuator channels (default: audio.channels)")
     p.set_defaults(func=cmd_play)
+
+    p = sub.add_parser("validate", help="check preset files (errors name file, line, key, value, range)")
+    p.add_argument("files", nargs="+", type=Path, metavar="FILE.yaml")
+    p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser("rm", help="delete a user preset (shipped presets are read-only)")
+    add_config_arguments(p)
+    p.add_argument("name", type=preset_name)
+    p.set_defaults(func=cmd_rm)
 
     p = sub.add_parser("schema", help="print the JSON Schema of a preset file (editor completion; docs/presets.md)")
     p.set_defaults(func=cmd_schema)

@@ -20,9 +20,14 @@ from pathlib import Path
 from vibsynth.errors import PresetError
 from vibsynth.formats.files import size_limit_message
 from vibsynth.settings.config import Config
+from vibsynth.settings.models_preset import NAME_RULE
 from vibsynth.settings.presets import MAX_PRESET_BYTES, NAME_PATTERN, SUFFIX, WHAT, Preset, load_preset, save_preset
 
 log = logging.getLogger(__name__)
+
+
+class UnknownPresetError(PresetError):
+    """No preset (valid or broken) has this name: for a name typed on a command line, a usage error."""
 
 
 def shipped_presets_dir() -> Path:
@@ -273,7 +278,8 @@ class PresetLibrary:
                     try:
                         preset = load_preset(path, origin=origin)
                     except PresetError as exc:
-                        self._report(f"file:{path}", str(exc), logging.ERROR, f"{exc}{keeping}")
+                        skipped = keeping or "; skipped until the file is fixed"
+                        self._report(f"file:{path}", str(exc), logging.WARNING, f"{exc}{skipped}")
                         states[path] = _FileState(origin, folder, signature, last_good, str(exc), recheck)
                     else:
                         self._resolve(f"file:{path}")
@@ -346,13 +352,18 @@ class PresetLibrary:
             names = sorted(self._presets)
         if preset is not None:
             return preset
+        broken = [message for path, message in self.errors.items() if Path(path).stem == name]
+        if broken:  # the preset's file exists but is invalid: say what is wrong with it
+            raise PresetError(broken[0])
         lowered = {n.lower(): n for n in names}
         near = [lowered[name.lower()]] if name.lower() in lowered else []
         near += [n for n in difflib.get_close_matches(name, names, n=4, cutoff=0.5) if n not in near]
         hint = f"; did you mean {', '.join(near)}?" if near else ""
-        where = ", ".join(str(d) for d in (self.shipped_dir, self.user_dir) if d is not None)
-        raise PresetError(
-            f"unknown preset {name!r}{hint} ({len(names)} presets in {where}; `vibsynth preset list` shows them)"
+        with self._lock:
+            user = sum(1 for p in self._presets.values() if p.origin == "user")
+        where = f"{len(names) - user} shipped, {user} in {self.user_dir}" if self.user_dir else "all shipped"
+        raise UnknownPresetError(
+            f"unknown preset {name!r}{hint} ({len(names)} presets: {where}; `vibsynth preset list` shows them)"
         )
 
     def program_map(self) -> dict[int, str]:
@@ -393,9 +404,7 @@ class PresetLibrary:
     def user_path(self, name: str) -> Path:
         """Where a user preset of this name is (or would be) stored."""
         if not re.fullmatch(NAME_PATTERN, name):
-            raise PresetError(
-                f"preset name {name!r}: must be 1-64 letters, digits, '.', '_' or '-', starting with a letter or digit"
-            )
+            raise PresetError(f"preset name {name!r}: must be {NAME_RULE}")
         if self.user_dir is None:
             raise PresetError("no user preset folder configured (presets.user_dir)")
         return self.user_dir / f"{name}{SUFFIX}"

@@ -18,6 +18,7 @@ __all__ = [
     "BALANCE_LIMIT",
     "GLIDE_MAX_MS",
     "NAME_PATTERN",
+    "NAME_RULE",
     "TAG_PATTERN",
     "MAX_TAGS",
     "MAX_DESCRIPTION",
@@ -36,7 +37,7 @@ MAX_TAGS = 16
 MAX_DESCRIPTION = 4000
 MAX_PROGRAM = 127
 
-_NAME_RULE = "1-64 letters, digits, '.', '_' or '-', starting with a letter or digit"
+NAME_RULE = "1-64 letters, digits, '.', '_' or '-', starting with a letter or digit"
 _TAG_RULE = "1-32 letters, digits, spaces, '.', '_' or '-'"
 
 
@@ -62,7 +63,7 @@ class PresetModel(SettingsModel):
     name: str | None = setting(
         None,
         "the file name without .yaml (optional; if given it must match)",
-        allowed=_NAME_RULE,
+        allowed=NAME_RULE,
         pattern=NAME_PATTERN,
     )
     description: str | None = setting("", "free text", allowed="text (a string)", max_length=MAX_DESCRIPTION)
