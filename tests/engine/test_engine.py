@@ -7,9 +7,9 @@ import tracemalloc
 
 import numpy as np
 import pytest
-from vibsynth.engine._core import DRAIN_MAX
 
 from vibsynth.dsp.intensity import intensity_level_db, knob_to_level_db
+from vibsynth.engine._core import DRAIN_MAX
 from vibsynth.engine.commands import Panic, SetGlide, SetKnob, SetMute
 from vibsynth.engine.engine import Engine
 from vibsynth.errors import ParameterError, ScheduleFullError
