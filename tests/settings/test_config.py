@@ -102,7 +102,7 @@ def test_default_sources_name_the_package_file_and_line():
         ("midi:\n  channel_map: {17: all}\n", ["{path}:2:", "key 17 is not a MIDI channel 1..16"]),
         (
             "midi:\n  mapping:\n    intensity: [{cc: 200}]\n",
-            ["{path}:3:", "midi.mapping.intensity", "cc 200 is outside [0, 127]"],
+            ["{path}:3:", "midi.mapping.intensity", "cc 200 is outside [0, 119]"],
         ),
         ("midi:\n  mapping:\n    volume: [{cc: 7}]\n", ["{path}:3:", "unknown key 'midi.mapping.volume'"]),
         ("actuator:\n  response: [[0, 1]]\n", ["{path}:2:", "Hz 0 is outside (0, inf)"]),
@@ -395,3 +395,23 @@ def test_actuator_profile_bomb_is_refused(tmp_path):
     config = load_config(overrides={"actuator.profile": "coil"}, user_file=False, env={})
     with pytest.raises(ConfigError, match=r"coil.yaml:4:8: YAML alias '\*a' .* not allowed in an actuator profile"):
         resolve_actuator_response(config)
+
+
+def test_config_check_and_the_midi_input_agree_on_bindable_controllers(tmp_path):
+    """CC 120-127 are channel mode messages: refused by config check, as by the MIDI mapper at serve."""
+    from vibsynth.control.midi.bindings import parse_bindings
+
+    for cc, ok in ((119, True), (120, False), (127, False)):
+        path = tmp_path / f"cc{cc}.yaml"
+        path.write_text(f"midi:\n  mapping:\n    intensity: [{{cc: {cc}}}]\n")
+        try:
+            check_config_file(path)
+            checked = True
+        except ConfigError:
+            checked = False
+        try:
+            parse_bindings({"intensity": [{"cc": cc}]})
+            parsed = True
+        except ConfigError:
+            parsed = False
+        assert checked == parsed == ok, cc

@@ -14,6 +14,7 @@ from pydantic import BeforeValidator, ConfigDict, Field, ValidationInfo, model_v
 
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.values import (
+    BINDABLE_CC_MAX,
     CC_MAX,
     MIDI_CHANNELS,
     NRPN_MAX,
@@ -200,7 +201,9 @@ class MidiBinding(ValueModel):
 
     model_config = ConfigDict(json_schema_extra={"oneOf": [{"required": ["cc"]}, {"required": ["nrpn"]}]})
 
-    cc: Annotated[int, Field(ge=0, le=CC_MAX)] | None = setting(None, "controller number")
+    cc: Annotated[int, Field(ge=0, le=BINDABLE_CC_MAX)] | None = setting(
+        None, "controller number (120-127 are channel mode messages, not bindable)"
+    )
     nrpn: _Nrpn | None = setting(None, "NRPN parameter number: 0..16383 or [msb, lsb]")
     channel: Annotated[int, Field(ge=1, le=MIDI_CHANNELS)] | None = setting(
         None, "MIDI channel 1-16 (null = every channel)"

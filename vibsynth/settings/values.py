@@ -26,13 +26,17 @@ __all__ = [
     "check_nrpn_map",
     "NRPN_MAX",
     "CC_MAX",
+    "BINDABLE_CC_MAX",
     "MIDI_CHANNELS",
 ]
 
 NRPN_MAX = 16383
 CC_MAX = 127
+#: Highest controller a knob may be bound to: CC 120-127 are channel mode messages (all sound
+#: off, reset controllers, all notes off, ...) that the mapper handles itself.
+BINDABLE_CC_MAX = 119
 MIDI_CHANNELS = 16
-_BINDING_KEYS = {"cc": (0, CC_MAX), "channel": (1, MIDI_CHANNELS)}
+_BINDING_KEYS = {"cc": (0, BINDABLE_CC_MAX), "channel": (1, MIDI_CHANNELS)}
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from vibsynth.errors import ConfigError, ParameterError
+from vibsynth.settings.values import BINDABLE_CC_MAX
 
 KNOBS = ("intensity", "balance")
 
@@ -130,8 +131,8 @@ def parse_bindings(mapping: Mapping[str, Any] | None, nrpn: Mapping[str, Any] | 
         for i, entry in enumerate(entries):
             w = f"{where}[{i}]"
             if not isinstance(entry, Mapping) or ("cc" in entry) == ("nrpn" in entry):
-                raise ConfigError(f"{w}: expected {{cc: 0-119}} or {{nrpn: N}}, got {entry!r}")
-            cc = _int_in(entry["cc"], 0, 119, w + ".cc") if "cc" in entry else None
+                raise ConfigError(f"{w}: expected {{cc: 0-{BINDABLE_CC_MAX}}} or {{nrpn: N}}, got {entry!r}")
+            cc = _int_in(entry["cc"], 0, BINDABLE_CC_MAX, w + ".cc") if "cc" in entry else None
             if cc is not None and cc in _PARAMETER_CCS:
                 raise ConfigError(f"{w}.cc: controller {cc} is reserved for NRPN/RPN data")
             num = _nrpn_number(entry["nrpn"], w + ".nrpn") if "nrpn" in entry else None
