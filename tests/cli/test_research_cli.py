@@ -149,3 +149,20 @@ def test_encode_codes_a_non_stationary_recording_per_window(tmp_path, basis, cap
     assert main(["encode", str(src), "-o", str(tmp_path / "k.vbt"), "--json", "--keep-segments"]) == 0
     kept = json.loads(capsys.readouterr().out)
     assert kept["segmentation"]["segments"] and kept["quality"]["window_level_max_db"] > 10
+
+
+def test_plot_spectrum_takes_a_folder_with_recursive(tmp_path, recordings):
+    pytest.importorskip("matplotlib")
+    import matplotlib.image as mpimg
+
+    folder, paths, _ = recordings
+    one, three = tmp_path / "one.png", tmp_path / "three.png"
+    sub = tmp_path / "scans" / "deep"
+    sub.mkdir(parents=True)
+    for p in paths[:3]:
+        (sub / p.name).write_bytes(p.read_bytes())
+    assert main(["plot", "spectrum", str(paths[0]), "-o", str(one)]) == 0
+    assert main(["plot", "spectrum", "-r", str(tmp_path / "scans"), "-o", str(three)]) == 0
+    h1, h3 = mpimg.imread(one).shape[0], mpimg.imread(three).shape[0]
+    assert 2.0 < h3 / h1 < 3.5  # one panel per recording found under the folder (plus one title and axis)
+    assert main(["plot", "spectrum", str(tmp_path / "scans"), "-o", str(three)]) == 2  # a folder needs -r

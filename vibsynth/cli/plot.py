@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from vibsynth.cli._common import add_basis_argument, basis_from_args, sample_rate
+from vibsynth.cli._inputs import add_recursive_argument, expand_recordings
 from vibsynth.errors import InputError, ParameterError
 
 ORDER = 60
@@ -30,7 +31,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     common(q, "basis.png")
     q.set_defaults(func=run_basis)
     q = sub.add_parser("spectrum", help="measured spectra vs S1 and S1:8 reconstructions (Fig. 6c)")
-    q.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    q.add_argument("files", nargs="+", type=Path, metavar="FILE", help="recordings, or folders with --recursive")
+    add_recursive_argument(q)
     q.add_argument("--variants", action="store_true", help="also draw S2:8 and M")
     q.add_argument("--rate", type=sample_rate, help="sample rate of CSV/TXT recordings (Hz)")
     common(q, "spectrum.png")
@@ -65,7 +67,7 @@ def run_spectrum(args: argparse.Namespace) -> int:
 
     basis = basis_from_args(args)
     spectra = []
-    for f in args.files:
+    for f in expand_recordings(args.files, recursive=args.recursive):
         rec = read_recording(f, fs=args.rate)
         try:
             spectra.append((rec.path.name, analyze(rec.samples, fs=rec.fs, basis=basis).band_db))
