@@ -75,3 +75,14 @@ def test_bad_set_value(capsys):
 def test_path(capsys, tmp_path):
     code, out, _ = run(capsys, "config", "path")
     assert code == 0 and str(tmp_path / "cfg" / "vibsynth" / "config.yaml") in out and "VIBSYNTH_OSC_PORT" in out
+
+
+def test_show_as_csv(capsys):
+    import csv
+    import io
+
+    code, out, _ = run(capsys, "config", "show", "osc", "--format", "csv", "--set", "osc.port=9600")
+    rows = list(csv.DictReader(io.StringIO(out)))
+    port = next(r for r in rows if r["key"] == "osc.port")
+    assert code == 0 and port == {"key": "osc.port", "value": "9600", "source": "command line"}
+    assert all(r["key"].startswith("osc.") for r in rows) and len(rows) > 10

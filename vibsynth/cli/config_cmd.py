@@ -10,6 +10,7 @@ from typing import Any
 
 import yaml
 
+from vibsynth.cli._table import Column, emit
 from vibsynth.errors import ConfigError, ParameterError
 from vibsynth.settings.actuators import resolve_actuator_response
 from vibsynth.settings.config import (
@@ -39,14 +40,19 @@ def cmd_show(args: argparse.Namespace) -> int:
                 config.get(args.key)  # raises with a "did you mean"
             except ConfigError as exc:
                 raise ParameterError(str(exc)) from None  # a key typed on the command line
-    if args.json:
+    fmt = "json" if args.json else "yaml" if args.yaml else (args.format or "table")
+    if fmt == "json":
         print(
             json.dumps(
                 {k: {"value": v, "source": config.sources.get(k, "")} for k, v in leaves.items()}, indent=2, default=str
             )
         )
         return 0
-    if args.yaml:
+    if fmt == "csv":
+        rows = [{"key": k, "value": _value(v), "source": config.sources.get(k, "")} for k, v in leaves.items()]
+        emit(rows, (Column("key", "key"), Column("value", "value"), Column("source", "source")), "csv")
+        return 0
+    if fmt == "yaml":
         print(yaml.safe_dump(config.data, sort_keys=False, default_flow_style=None), end="")
         return 0
     rows = [(k, _value(v), config.sources.get(k, "")) for k, v in leaves.items()]
@@ -97,8 +103,14 @@ def register(subparsers: Any) -> None:
     add_config_arguments(p)
     p.add_argument("key", nargs="?", help="only this key or section (e.g. audio, osc.port)")
     fmt = p.add_mutually_exclusive_group()
-    fmt.add_argument("--json", action="store_true", help="values and sources as JSON")
-    fmt.add_argument("--yaml", action="store_true", help="the effective config as a YAML file (no sources)")
+    fmt.add_argument(
+        "--format",
+        choices=("table", "json", "csv", "yaml"),
+        default=None,
+        help="table (default); json or csv: key, value, source; yaml: the effective config as a file",
+    )
+    fmt.add_argument("--json", action="store_true", help="same as --format json")
+    fmt.add_argument("--yaml", action="store_true", help="same as --format yaml")
     p.set_defaults(func=cmd_show)
 
     p = sub.add_parser("check", help="validate config files (errors name file, line, key, value, range)")
