@@ -49,8 +49,8 @@ def cmd_show(args: argparse.Namespace) -> int:
         )
         return 0
     if fmt == "csv":
-        rows = [{"key": k, "value": _value(v), "source": config.sources.get(k, "")} for k, v in leaves.items()]
-        emit(rows, (Column("key", "key"), Column("value", "value"), Column("source", "source")), "csv")
+        table = [{"key": k, "value": _value(v), "source": config.sources.get(k, "")} for k, v in leaves.items()]
+        emit(table, (Column("key", "key"), Column("value", "value"), Column("source", "source")), "csv")
         return 0
     if fmt == "yaml":
         print(yaml.safe_dump(config.data, sort_keys=False, default_flow_style=None), end="")
