@@ -345,3 +345,18 @@ def test_why_an_address_is_unknown(channels, address, reason):
     space = AddressSpace("/vibsynth", channels)
     assert space.match(address) == ()
     assert space.why_unknown(address) == reason
+
+
+def test_why_unknown_never_compares_long_names(monkeypatch):
+    """difflib's cost grows with the text an attacker sends: only short ASCII names are compared."""
+    import difflib
+
+    compared = []
+    real = difflib.get_close_matches
+    monkeypatch.setattr(
+        difflib, "get_close_matches", lambda word, *a, **k: compared.append(word) or real(word, *a, **k)
+    )
+    space = AddressSpace("/vibsynth", 2)
+    for address in ("/vibsynth/" + "x" * 60_000, "/vibsynth/ch/1/" + "é" * 10, "/vibsynth/ch/1/intensty"):
+        space.why_unknown(address)
+    assert compared == ["intensty"]

@@ -329,8 +329,11 @@ class AddressSpace:
                 return f"channel {n} out of range (this server has {self.channels} {plural}: 1..{self.channels})"
         method = parts[-1] if parts else ""
         candidates = CHANNEL_METHODS if len(parts) == 4 and parts[1] == "ch" else GLOBAL_METHODS
-        close = difflib.get_close_matches(method, candidates, n=1, cutoff=0.75) if method.isascii() else []
-        if close and len(method) <= 32:
+        # a near miss of a real method name only: difflib's cost grows with the text, and an
+        # attacker chooses the text, so long or non-ASCII names are not compared at all
+        short = len(method) <= 16 and method.isascii()
+        close = difflib.get_close_matches(method, candidates, n=1, cutoff=0.75) if short else []
+        if close:
             return f"unknown address (did you mean .../{close[0]}?)"
         return "unknown address"
 
