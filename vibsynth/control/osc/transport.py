@@ -30,6 +30,7 @@ from typing import Any
 
 from vibsynth.control.osc.fast import make_receiver
 from vibsynth.settings.allow_list import AllowList
+from vibsynth.settings.models_config import Osc
 
 __all__ = [
     "TransportStats",
@@ -53,11 +54,12 @@ log = logging.getLogger(__name__)
 DEFAULT_RCVBUF = 4 * 1024 * 1024
 MAX_DATAGRAM = 65536
 
-TCP_MAX_CONNECTIONS = 64
+# The TCP limits' defaults are the settings' (one definition: vibsynth/settings/models_config.py).
+TCP_MAX_CONNECTIONS: int = Osc.model_fields["tcp_max_connections"].default
 """Open TCP connections in all (``osc.tcp_max_connections``); twice the 32 /notify subscribers."""
-TCP_MAX_PER_PEER = 4
+TCP_MAX_PER_PEER: int = Osc.model_fields["tcp_max_per_peer"].default
 """Open TCP connections from one client IP address (``osc.tcp_max_per_peer``)."""
-TCP_IDLE_TIMEOUT_S = 30.0
+TCP_IDLE_TIMEOUT_S: float = Osc.model_fields["tcp_idle_timeout_s"].default
 """A TCP connection without a complete packet for this long is closed (``osc.tcp_idle_timeout_s``)."""
 _POLL_S = 0.25
 
