@@ -182,13 +182,10 @@ def status_line(engine: Engine, output: OutputBackend) -> str:
 
 
 def _load_presets(config: Any) -> tuple[Any, Any]:
-    """(library, PresetWatcher class) or (None, None) when presets are unavailable."""
-    try:
-        from vibsynth.settings.library import load_library
-        from vibsynth.settings.reload import PresetWatcher
-    except ImportError as exc:
-        log.warning("presets are not available (%s); serving without them", exc)
-        return None, None
+    """(library, PresetWatcher class), or (None, None) when the preset folders cannot be read."""
+    from vibsynth.settings.library import load_library
+    from vibsynth.settings.reload import PresetWatcher
+
     try:
         return load_library(config), PresetWatcher
     except VibsynthError as exc:

@@ -308,12 +308,9 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
 
 def _preset_engine(config: Config, library: PresetLibrary, name: str) -> Any:
     """An engine (``vibsynth.app.service.build_engine``) with the preset loaded at frame 0."""
+    from vibsynth.app.service import build_engine
     from vibsynth.control.controller import Controller, KnobLimits
 
-    try:
-        from vibsynth.app.service import build_engine
-    except ImportError as exc:  # pragma: no cover - service.py comes from another issue
-        raise PresetError(f"preset play needs vibsynth.app.service.build_engine ({exc})") from None
     preset = _get(library, name)
     engine = build_engine(config)
     knobs = config.section("knobs")
@@ -361,12 +358,9 @@ def cmd_play(args: argparse.Namespace) -> int:
         return 0
     import time
 
+    from vibsynth.app.service import build_engine, open_output
     from vibsynth.control.controller import Controller, KnobLimits
 
-    try:
-        from vibsynth.app.service import build_engine, open_output
-    except ImportError as exc:  # pragma: no cover
-        raise PresetError(f"preset play needs vibsynth.app.service ({exc}); use -o FILE.wav meanwhile") from None
     engine = build_engine(config)
     knobs = config.section("knobs")
     controller = Controller(

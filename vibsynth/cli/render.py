@@ -100,20 +100,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _render_midi(args: argparse.Namespace) -> RenderResult:
-    try:
-        from vibsynth.app.midi_render import prepare_midi_render, render_midi_to
-    except ImportError as exc:
-        raise InputError(f"MIDI rendering is unavailable: {exc}") from None
+    from vibsynth.app.midi_render import prepare_midi_render, render_midi_to
     from vibsynth.settings.config import load_config
 
     overrides = {"audio": {"rate": int(args.rate)}} if args.rate else None
     config = load_config(args.config, overrides=overrides)
-    try:
-        from vibsynth.settings.library import load_library
+    from vibsynth.settings.library import load_library
 
-        presets = load_library(config)
-    except ImportError:
-        presets = None
+    presets = load_library(config)
     job = prepare_midi_render(
         args.midi, config=config, basis=basis_from_args(args), seconds=args.seconds, presets=presets
     )
