@@ -3,46 +3,28 @@
 from __future__ import annotations
 
 import argparse
-import math
 
+from vibsynth.cli._common import integer_in, positive_seconds
 from vibsynth.errors import ParameterError
 
-__all__ = ["add_server_arguments", "server_address", "timeout_seconds"]
+__all__ = ["add_server_arguments", "server_address"]
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 9570
-
-
-def timeout_seconds(text: str) -> float:
-    """An argparse type: a finite, positive number of seconds (at most an hour)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not math.isfinite(value) or not 0 < value <= 3600:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected seconds in (0, 3600]")
-    return value
-
-
-def _port(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
-    if not 1 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"port {value} is outside 1..65535")
-    return value
 
 
 def add_server_arguments(parser: argparse.ArgumentParser, *, timeout: float = 1.0) -> None:
     """Add ``--host``, ``--port`` (defaults: the config's ``osc.host``/``osc.port``) and ``--timeout``."""
     parser.add_argument("--host", default=None, help=f"server host (default: osc.host from the config, {DEFAULT_HOST})")
     parser.add_argument(
-        "--port", type=_port, default=None, help=f"server UDP port (default: osc.port from the config, {DEFAULT_PORT})"
+        "--port",
+        type=integer_in(1, 65535, what="port"),
+        default=None,
+        help=f"server UDP port (default: osc.port from the config, {DEFAULT_PORT})",
     )
     parser.add_argument(
         "--timeout",
-        type=timeout_seconds,
+        type=positive_seconds,
         default=timeout,
         metavar="SECONDS",
         help=f"how long to wait for the server (default {timeout:g})",
@@ -67,5 +49,5 @@ def server_address(args: argparse.Namespace) -> tuple[str, int]:
     if host in ("0.0.0.0", "::"):
         host = DEFAULT_HOST  # a server listening everywhere is reached on this machine
     if not 1 <= port <= 65535:
-        raise ParameterError(f"port {port} is outside 1..65535")
+        raise ParameterError(f"--port {port} is outside [1, 65535]")
     return host, port

@@ -9,7 +9,8 @@ import sys
 import time
 from typing import Any
 
-from vibsynth.cli._server import add_server_arguments, server_address, timeout_seconds
+from vibsynth.cli._common import integer_in, positive_seconds
+from vibsynth.cli._server import add_server_arguments, server_address
 
 ORDER = 8
 
@@ -27,16 +28,6 @@ when this command ends. Over UDP this works from the server's own machine.
 RENEW_S = 10.0
 
 
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"--count {value}: expected 1 or more")
-    return value
-
-
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = subparsers.add_parser(
         "monitor",
@@ -45,8 +36,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_server_arguments(p)
-    p.add_argument("--seconds", type=timeout_seconds, default=None, metavar="S", help="stop after S seconds")
-    p.add_argument("--count", type=_count, default=None, metavar="N", help="stop after N events")
+    p.add_argument("--seconds", type=positive_seconds, default=None, metavar="S", help="stop after S seconds")
+    p.add_argument("--count", type=integer_in(1, what="--count"), default=None, metavar="N", help="stop after N events")
     p.add_argument("--format", choices=("text", "json"), default="text", help="text lines (default) or JSON lines")
     p.set_defaults(func=run)
 

@@ -24,6 +24,7 @@ from vibsynth.app.client import (
     encode_message,
     format_reply,
 )
+from vibsynth.cli._server import server_address
 from vibsynth.errors import NoReplyError, ParameterError
 
 ORDER = 6
@@ -128,24 +129,6 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.set_defaults(func=run)
 
 
-def _defaults(args: argparse.Namespace) -> tuple[str, int]:
-    host, port = args.host, args.port
-    if host is None or port is None:
-        try:
-            from vibsynth.settings.config import load_config
-
-            section = load_config().data.get("osc", {})
-        except Exception:  # noqa: BLE001 - the client must work even with a broken config
-            section = {}
-        host = host or section.get("host") or "127.0.0.1"
-        port = port if port is not None else int(section.get("port") or 9570)
-    if host in ("0.0.0.0", "::"):
-        host = "127.0.0.1"
-    if not 1 <= port <= 65535:
-        raise ParameterError(f"--port {port} is outside [1, 65535]")
-    return host, port
-
-
 def prefix_of(address: str) -> str:
     """The server prefix an address was sent under: ``/vibsynth/ch/2/intensity`` -> ``/vibsynth``."""
     head = address.rstrip("/").rsplit("/", 1)[0]
@@ -204,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
         if not math.isfinite(args.delay):
             raise ParameterError("--delay must be finite")
         data = encode_bundle(IMMEDIATELY if args.delay == 0 else time.time() + args.delay, [data])
-    host, port = _defaults(args)
+    host, port = server_address(args)
     with Client(host, port, prefix=prefix_of(args.address), local_port=args.from_port) as client:
         try:
             replies, answered = exchange(client, data, wait)

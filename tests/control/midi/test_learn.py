@@ -11,6 +11,7 @@ import mido
 import pytest
 import yaml
 
+from tests.control.midi.fakes import FakeEngine
 from vibsynth.control.controller import Controller
 from vibsynth.control.midi.adapter import learn
 from vibsynth.control.midi.bindings import Binding, MidiSettings, parse_bindings
@@ -36,20 +37,6 @@ midi:
 osc:
   port: 9999  # custom port
 """
-
-
-class FakeEngine:
-    channels, fs = 1, 48000.0
-
-    def __init__(self) -> None:
-        self.n = 0
-
-    def submit(self, command) -> int:
-        self.n += 1
-        return self.n
-
-    applied_seq = property(lambda self: self.n)
-    frame_position = property(lambda self: 0)
 
 
 def test_save_keeps_comments_and_other_keys(tmp_path):

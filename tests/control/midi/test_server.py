@@ -8,26 +8,13 @@ import types
 import mido
 import pytest
 
+from tests.control.midi.fakes import FakeEngine
 from vibsynth.control.controller import Controller
 from vibsynth.control.midi import server as midi_server
 from vibsynth.control.midi.bindings import MidiSettings
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import VIRTUAL_PORT_NAME, MidiServer, RtMidiInput, rtmidi_module
 from vibsynth.settings.config import default_config_data
-
-
-class FakeEngine:
-    channels, fs = 1, 48000.0
-
-    def __init__(self) -> None:
-        self.n = 0
-
-    def submit(self, command) -> int:
-        self.n += 1
-        return self.n
-
-    applied_seq = property(lambda self: self.n)
-    frame_position = property(lambda self: 0)
 
 
 class FakeMidiIn:
