@@ -3,6 +3,7 @@
 * ``vibsynth.engine._core``: the real-time core (callback, mix, command ring, scheduler).
 * ``vibsynth.control.osc._fast``: the OSC UDP receive loop and its fast path.
 """
+
 import sys
 
 from setuptools import Extension, setup
@@ -26,7 +27,9 @@ setup(
     ext_modules=[
         Extension("vibsynth.engine._core", ["vibsynth/engine/_core.c"], depends=["vibsynth/engine/_core_api.h"]),
         Extension(
-            "vibsynth.control.osc._fast", ["vibsynth/control/osc/_fast.c"], depends=["vibsynth/engine/_core_api.h"],
+            "vibsynth.control.osc._fast",
+            ["vibsynth/control/osc/_fast.c"],
+            depends=["vibsynth/engine/_core_api.h"],
             libraries=["ws2_32"] if sys.platform == "win32" else [],
         ),
     ],

@@ -9,6 +9,13 @@ OSC, MIDI, preset hot reload and the command line all go through a
   rejected with a message naming the range; nothing changes.
 * channel numbers are 0-based here (adapters translate from their own convention).
 
+Layers: a channel's knobs are driven by one control layer at a time, the highest active
+one of ``knobs`` (direct control: OSC, MIDI, presets, the studio) < ``sources`` (the spatial
+mixer) < ``clip`` (the clip player). Direct knob moves on a channel a higher layer drives are
+remembered and play when that layer releases the channel (:meth:`Controller.release`);
+the engine enforces the same rule in stream order (see :mod:`vibsynth.engine.engine`), so
+moves from the OSC fast path, which bypass this class, obey it too.
+
 The controller keeps the *target* state for queries and pushes every change to
 subscribers (e.g. OSC ``/notify`` clients): per channel and setting, the value the engine
 will hold once every command submitted so far has taken effect. Each value remembers the
@@ -29,7 +36,17 @@ from dataclasses import dataclass, replace
 from typing import Protocol
 
 from vibsynth.control.tap import InputTap
-from vibsynth.engine.commands import KNOB_NAMES, Command, Panic, SetGlide, SetKnob, SetMute
+from vibsynth.engine.commands import (
+    KNOB_NAMES,
+    LAYER_NAMES,
+    CancelLayer,
+    Command,
+    Panic,
+    SetGlide,
+    SetKnob,
+    SetLayer,
+    SetMute,
+)
 from vibsynth.errors import ParameterError, PresetError
 from vibsynth.settings.models import bounds_of, default_of
 
@@ -104,7 +121,11 @@ class ChannelState:
 
 @dataclass(frozen=True)
 class KnobEvent:
-    """A change pushed to subscribers: ``name`` in intensity, balance, glide, mute, preset."""
+    """A change pushed to subscribers: ``name`` in intensity, balance, glide, mute, preset, driver.
+
+    intensity and balance are what the channel plays (its driving layer's targets); driver
+    is the name of that layer (see :data:`~vibsynth.engine.commands.LAYER_NAMES`).
+    """
 
     channel: int
     name: str
@@ -113,6 +134,9 @@ class KnobEvent:
 
 
 Listener = Callable[[KnobEvent], None]
+PanicListener = Callable[[], None]
+
+_KNOB_FIELDS = frozenset(KNOB_NAMES)
 
 #: What a knob event carries: a number (intensity, balance, glide), a flag (mute) or a preset name.
 KnobValue = float | str | bool | None
@@ -176,6 +200,11 @@ class Controller:
         # Stream frame at which each (channel, field) value takes effect.
         self._effective: list[dict[str, int]] = [{} for _ in range(engine.channels)]
         self._listeners: list[Listener] = []
+        self._panic_listeners: list[PanicListener] = []
+        # Direct-control (layer 0) targets, and the targets of the higher layers active per channel.
+        self._knobs: list[dict[str, float]] = [{"intensity": 0.0, "balance": 0.0} for _ in range(engine.channels)]
+        self._layers: list[dict[int, dict[str, float]]] = [{} for _ in range(engine.channels)]
+        self._top = [0] * engine.channels
         self._last_seq = 0
         self.started_at = time.monotonic()
         self.error_counts: dict[str, int] = {}
@@ -225,6 +254,10 @@ class Controller:
         if frame < effective.get(field, -1):
             return
         effective[field] = frame
+        if field in _KNOB_FIELDS:
+            self._knobs[c][field] = float(value)  # type: ignore[arg-type]  # knob values are numbers
+            if self._top[c] != 0:
+                return  # remembered: plays when the higher layers release the channel
         self._state[c] = replace(self._state[c], **{field: value})  # type: ignore[arg-type]  # field names a ChannelState field
         events.append(KnobEvent(c, _EVENT_NAMES.get(field, field), value, source))
 
@@ -328,11 +361,188 @@ class Controller:
         self._apply(SetMute(bool(muted), self._engine_channels(chans), at_frame), chans, "muted", bool(muted), source)
 
     def panic(self, *, source: str = "api") -> None:
-        """Silence every channel now (intensity targets to 0, scheduled commands dropped)."""
+        """Silence every channel now: intensity targets to 0, scheduled commands dropped, every
+        channel handed back to direct knob control (clips stop, sources turn off: the panic
+        listeners are told)."""
+        events: list[KnobEvent] = []
         with self._lock:  # panic drops every scheduled command: nothing later-timed is waiting
             for effective in self._effective:
                 effective.clear()
+            for c in range(self.channels):
+                self._layers[c].clear()
+                if self._top[c] != 0:
+                    self._top[c] = 0
+                    self._show_top(c, source, events)
+            listeners = list(self._listeners) if events else []
+            panic_listeners = list(self._panic_listeners)
+        _notify(listeners, events)
         self._apply(Panic(), tuple(range(self.channels)), "intensity", 0.0, source)
+        for callback in panic_listeners:
+            callback()
+
+    def on_panic(self, callback: PanicListener) -> Callable[[], None]:
+        """Call ``callback()`` after every panic (drivers drop their state); returns an unsubscribe function."""
+        with self._lock:
+            self._panic_listeners.append(callback)
+
+        def unsubscribe() -> None:
+            with self._lock:
+                if callback in self._panic_listeners:
+                    self._panic_listeners.remove(callback)
+
+        return unsubscribe
+
+    # ------------------------------------------------------------------ layers
+    @staticmethod
+    def layer_index(layer: str) -> int:
+        """Engine index of a driving layer name (``sources`` or ``clip``; ``knobs`` is 0)."""
+        try:
+            return LAYER_NAMES.index(layer)
+        except ValueError:
+            raise ParameterError(f"unknown layer {layer!r}; layers are {', '.join(LAYER_NAMES)}") from None
+
+    def _driving_index(self, layer: str) -> int:
+        index = self.layer_index(layer)
+        if index == 0:
+            raise ParameterError("direct knob control is the base layer: use set_knob, not drive/release")
+        return index
+
+    def _show_top(self, c: int, source: str, events: list[KnobEvent]) -> None:
+        """With the lock held: make ``_state[c]`` show the targets of the channel's top layer."""
+        top = self._top[c]
+        values = self._knobs[c] if top == 0 else self._layers[c][top]
+        state = self._state[c]
+        for name in KNOB_NAMES:
+            if getattr(state, name) != values[name]:
+                state = replace(state, **{name: values[name]})  # type: ignore[arg-type]
+                events.append(KnobEvent(c, name, values[name], source))
+        self._state[c] = state
+        events.append(KnobEvent(c, "driver", LAYER_NAMES[top], source))
+
+    def drive(
+        self,
+        layer: str,
+        *,
+        channels: Sequence[int] | None = None,
+        intensity: float | None = None,
+        balance: float | None = None,
+        at_frame: int | None = None,
+        glide_s: float | None = None,
+        source: str = "api",
+    ) -> None:
+        """Move a driving layer's knob targets on channels (activating the layer there).
+
+        Where ``layer`` becomes the highest active layer it takes the channel over (from
+        ``at_frame``, in stream order); where a higher layer drives, the targets are kept
+        for when it releases. A knob left None keeps the layer's target (on activation:
+        what the channel plays).
+
+        Parameters
+        ----------
+        layer : {"sources", "clip"}
+        channels : sequence of int, optional
+            0-based; None = every channel.
+        intensity, balance : float, optional
+            Validated like :meth:`set_knob`.
+        at_frame : int, optional
+            Stream frame of the move (exact); None = now.
+        glide_s : float, optional
+            Glide of this move (None: the channel's glide).
+        """
+        index = self._driving_index(layer)
+        wanted = (("balance", balance), ("intensity", intensity))
+        moves = [(name, self.validate_knob(name, value)) for name, value in wanted if value is not None]
+        if glide_s is not None:
+            glide_s = check_range("glide", glide_s, 0.0, self.limits.glide_max_s)
+        chans = self._channel_list(channels)
+        events: list[KnobEvent] = []
+        with self._lock:
+            takeover = [c for c in chans if index > self._top[c]]
+            if takeover:
+                self._submit(SetLayer(index, self._engine_channels(tuple(takeover)), at_frame))
+            for c in chans:
+                if index not in self._layers[c]:
+                    self._layers[c][index] = {n: getattr(self._state[c], n) for n in KNOB_NAMES}
+            for name, value in moves:
+                command = SetKnob(name, value, self._engine_channels(chans), at_frame, glide_s, index)  # type: ignore[arg-type]
+                self._submit(command)
+                for c in chans:
+                    self._layers[c][index][name] = value
+            for c in chans:
+                if c in takeover:
+                    self._top[c] = index
+                    self._show_top(c, source, events)
+                elif self._top[c] == index:
+                    for name, value in moves:
+                        if getattr(self._state[c], name) != value:
+                            self._state[c] = replace(self._state[c], **{name: value})  # type: ignore[arg-type]
+                            events.append(KnobEvent(c, name, value, source))
+            listeners = list(self._listeners) if events else []
+        _notify(listeners, events)
+
+    def release(
+        self,
+        layer: str,
+        *,
+        channels: Sequence[int] | None = None,
+        glide_s: float | None = None,
+        at_frame: int | None = None,
+        source: str = "api",
+    ) -> None:
+        """Deactivate a driving layer on channels; where it drove, glide to the next layer's targets.
+
+        Parameters
+        ----------
+        layer : {"sources", "clip"}
+        channels : sequence of int, optional
+        glide_s : float, optional
+            Glide to the next layer's targets (None: the channel's glide).
+        at_frame : int, optional
+            Stream frame of the hand-over; None = now.
+        """
+        index = self._driving_index(layer)
+        if glide_s is not None:
+            glide_s = check_range("glide", glide_s, 0.0, self.limits.glide_max_s)
+        chans = self._channel_list(channels)
+        events: list[KnobEvent] = []
+        with self._lock:
+            for c in chans:
+                if self._layers[c].pop(index, None) is None or self._top[c] != index:
+                    continue
+                top = max(self._layers[c], default=0)
+                values = self._knobs[c] if top == 0 else self._layers[c][top]
+                self._submit(SetLayer(top, (c,), at_frame))
+                for name in ("balance", "intensity"):
+                    self._submit(SetKnob(name, values[name], (c,), at_frame, glide_s, top))
+                self._top[c] = top
+                self._show_top(c, source, events)
+            listeners = list(self._listeners) if events else []
+        _notify(listeners, events)
+
+    def cancel_scheduled(self, layer: str, *, channels: Sequence[int] | None = None) -> None:
+        """Drop a driving layer's timetagged moves still waiting in the engine, on channels."""
+        index = self._driving_index(layer)
+        chans = self._channel_list(channels)
+        with self._lock:
+            self._submit(CancelLayer(index, self._engine_channels(chans)))
+
+    def driver(self, channel: int) -> str:
+        """Name of the layer driving a channel's knobs (0-based channel)."""
+        c = self._channel_list([channel])[0]
+        with self._lock:
+            return LAYER_NAMES[self._top[c]]
+
+    def layer_targets(self, layer: str, channel: int) -> tuple[float, float] | None:
+        """(intensity, balance) a layer holds for a channel; None where the layer is not active."""
+        index = self.layer_index(layer)
+        c = self._channel_list([channel])[0]
+        with self._lock:
+            values = self._knobs[c] if index == 0 else self._layers[c].get(index)
+            return None if values is None else (values["intensity"], values["balance"])
+
+    def _submit(self, command: Command) -> None:
+        """With the lock held: hand a command to the engine and remember its sequence number."""
+        self._last_seq = max(self._last_seq, self.engine.submit(command))
 
     # ------------------------------------------------------------------ presets
     def load_preset(
@@ -363,15 +573,21 @@ class Controller:
         with self._lock:
             return tuple(self._state)
 
-    def get(self, name: str, channel: int = 0) -> float | bool | str | None:
-        """One value of one channel: intensity, balance, glide (s), mute, preset."""
-        state = self.state()[self._channel_list([channel])[0]]
-        fields = {
+    def get(self, name: str, channel: int = 0) -> float | bool | str | tuple[float, float] | None:
+        """One value of one channel: intensity, balance, texture ((intensity, balance) it plays),
+        glide (s), mute, preset, driver (the layer driving its knobs)."""
+        c = self._channel_list([channel])[0]
+        with self._lock:
+            state = self._state[c]
+            driver = LAYER_NAMES[self._top[c]]
+        fields: dict[str, float | bool | str | tuple[float, float] | None] = {
             "intensity": state.intensity,
             "balance": state.balance,
+            "texture": (state.intensity, state.balance),
             "glide": state.glide_s,
             "mute": state.muted,
             "preset": state.preset,
+            "driver": driver,
         }
         if name not in fields:
             raise ParameterError(f"unknown setting {name!r}; known: {', '.join(fields)}")

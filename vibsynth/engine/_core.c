@@ -21,6 +21,19 @@
  * (scheduled submitted - scheduled done) reaches the cap, so the heap can never overflow
  * and the refusal happens on the control side, where it can be answered.
  *
+ * Layers: a channel's knobs are driven by one control layer at a time (0 direct knobs,
+ * 1 spatial sources, 2 clips). CMD_LAYER, in stream order, says which; a knob command moves
+ * only the channels its layer drives, so a knob message on a channel a clip plays, or a
+ * clip move queued before the clip was stopped, never reaches the ramps. CMD_CANCEL drops a
+ * layer's commands submitted before it (by sequence number), O(channels) per command.
+ *
+ * Voices: each channel can also play one float32 recording once (CMD_VOICE), added to the
+ * texture with a ramped gain and 5 ms edge fades, before the limiter's final clip. The
+ * producer keeps the samples alive until the channel's voice id no longer names them.
+ *
+ * Output tap: every rendered frame is also copied into a ring of TAP_FRAMES frames, which
+ * control threads read (Core.read_tap) for meters and spectra; the audio thread never waits.
+ *
  * Arithmetic: every operation, and its order, is that of the numpy engine this replaced
  * (double controls, float32 crossfade), so block-by-block output equals one-shot output
  * exactly and the knob semantics are unchanged. Build with -ffp-contract=off.
@@ -59,8 +72,10 @@
 #define DRAIN_MAX 1024
 #define KNOB_FADE_IN 0.01
 #define PA_OUTPUT_UNDERFLOW 0x00000004UL
+#define TAP_FRAMES 65536 /* a power of two */
+#define VOICE_FADE_S 0.005
 
-enum { R_INTENSITY = 0, R_BALANCE = 1, R_MUTE = 2 };
+enum { R_INTENSITY = 0, R_BALANCE = 1, R_MUTE = 2, R_VOICE = 3, N_RAMPS = 4 };
 typedef vs_cmd_t cmd_t;
 
 typedef struct {
@@ -85,8 +100,19 @@ typedef struct vs_core {
     float ceil32, floor32;
     int64_t max_block;
     /* real-time state (audio thread) */
-    ramps_t ramps[3];
+    ramps_t ramps[N_RAMPS];
     double glide_s[MAXCH];
+    int32_t top[MAXCH];                  /* layer driving each channel's knobs */
+    int64_t cancel_seq[MAXCH][VS_LAYERS]; /* a layer's commands below this seq are dropped */
+    /* voices */
+    const float *vbuf[MAXCH];
+    int64_t vlen[MAXCH], vpos[MAXCH];
+    int64_t vid[MAXCH]; /* published: seq of the CMD_VOICE playing, 0 = none */
+    int32_t vstop[MAXCH];
+    double vfade;
+    /* output tap */
+    float *tap;
+    int64_t tap_frame; /* published: frames written to the tap */
     int32_t muted[MAXCH];
     int64_t read_idx[MAXCH];
     int64_t frame;
@@ -196,9 +222,12 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
     case CMD_KNOB: {
         ramps_t *r = &c->ramps[cmd->arg == 0 ? R_INTENSITY : R_BALANCE];
         double value = cmd->value;
+        int layer = cmd->layer;
+        if (layer < 0 || layer >= VS_LAYERS) break;
         if (cmd->arg == 1) value = fmin(fmax(value, c->bal_lo), c->bal_hi);
         for (int ch = 0; ch < c->channels; ch++) {
             if (!(cmd->mask >> ch & 1)) continue;
+            if (c->top[ch] != layer || cmd->seq < c->cancel_seq[ch][layer]) continue;
             double glide = isnan(cmd->glide) ? c->glide_s[ch] : cmd->glide;
             ramp_move(r, ch, value, (int64_t)nearbyint(glide * fs), frame);
         }
@@ -222,8 +251,48 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
     case CMD_PANIC:
         STORE_REL(&c->sched_done, c->sched_done + c->heap_len);
         c->heap_len = 0;
-        for (int ch = 0; ch < c->channels; ch++)
+        for (int ch = 0; ch < c->channels; ch++) {
             ramp_move(&c->ramps[R_INTENSITY], ch, 0.0, (int64_t)nearbyint(c->mute_fade_s * fs), frame);
+            c->top[ch] = 0;
+            if (c->vbuf[ch]) {
+                c->vstop[ch] = 1;
+                ramp_move(&c->ramps[R_VOICE], ch, 0.0, (int64_t)nearbyint(c->mute_fade_s * fs), frame);
+            }
+        }
+        break;
+    case CMD_LAYER:
+        if (cmd->arg < 0 || cmd->arg >= VS_LAYERS) break;
+        for (int ch = 0; ch < c->channels; ch++)
+            if ((cmd->mask >> ch & 1) && cmd->seq >= c->cancel_seq[ch][cmd->arg]) c->top[ch] = cmd->arg;
+        break;
+    case CMD_CANCEL:
+        if (cmd->arg < 0 || cmd->arg >= VS_LAYERS) break;
+        for (int ch = 0; ch < c->channels; ch++)
+            if (cmd->mask >> ch & 1) c->cancel_seq[ch][cmd->arg] = cmd->seq;
+        break;
+    case CMD_VOICE: {
+        double glide = isnan(cmd->glide) ? 0.0 : cmd->glide;
+        for (int ch = 0; ch < c->channels; ch++) {
+            if (!(cmd->mask >> ch & 1)) continue;
+            if (cmd->ptr) {
+                c->vbuf[ch] = cmd->ptr;
+                c->vlen[ch] = cmd->ival;
+                c->vpos[ch] = 0;
+                c->vstop[ch] = 0;
+                STORE_REL(&c->vid[ch], cmd->seq);
+                ramp_move(&c->ramps[R_VOICE], ch, cmd->value, 0, frame);
+            } else if (c->vbuf[ch] && !c->vstop[ch]) {
+                ramp_move(&c->ramps[R_VOICE], ch, cmd->value, (int64_t)nearbyint(glide * fs), frame);
+            }
+        }
+        break;
+    }
+    case CMD_VOICE_STOP:
+        for (int ch = 0; ch < c->channels; ch++) {
+            if (!(cmd->mask >> ch & 1) || !c->vbuf[ch]) continue;
+            c->vstop[ch] = 1;
+            ramp_move(&c->ramps[R_VOICE], ch, 0.0, (int64_t)nearbyint(c->vfade), frame);
+        }
         break;
     default:
         break;
@@ -290,8 +359,8 @@ static inline void controls(const Core *c, int ch, double step, float *G, float 
 static void segment(Core *c, float *out, int64_t stride, const int *colmap, int64_t s0, int64_t s1, int64_t frame) {
     int64_t m = s1 - s0;
     int64_t end = c->ramps[0].end_frame;
-    if (c->ramps[1].end_frame > end) end = c->ramps[1].end_frame;
-    if (c->ramps[2].end_frame > end) end = c->ramps[2].end_frame;
+    for (int k = 1; k < N_RAMPS; k++)
+        if (c->ramps[k].end_frame > end) end = c->ramps[k].end_frame;
     int ramping = frame < end;
     const float *flat = c->flat;
     int64_t n = c->n;
@@ -302,6 +371,8 @@ static void segment(Core *c, float *out, int64_t stride, const int *colmap, int6
         controls(c, ch, 1.0, &G, &F, &I);
         int64_t r = c->read_idx[ch];
         float *dst = out + s0 * stride + colmap[ch];
+        const float *vb = c->vbuf[ch];
+        int64_t vp = c->vpos[ch], vl = c->vlen[ch];
         for (int64_t j = 0; j < m; j++) {
             if (ramping && j) controls(c, ch, (double)(j + 1), &G, &F, &I);
             const float *row = flat + I * n;
@@ -310,17 +381,31 @@ static void segment(Core *c, float *out, int64_t stride, const int *colmap, int6
             hi = hi * F;
             hi = lo + hi;
             hi = hi * G;
+            if (vb && vp < vl) {
+                double edge = fmin(fmin((double)(vp + 1), (double)(vl - vp)) / c->vfade, 1.0);
+                hi += (float)((double)vb[vp] * ramp_at(&c->ramps[R_VOICE], ch, (double)(j + 1)) * edge);
+                vp++;
+            }
             hi = hi < hi_clip ? hi : hi_clip;
             hi = hi > lo_clip ? hi : lo_clip;
             dst[j * stride] = hi;
             if (++r == n) r = 0;
         }
         c->read_idx[ch] = r;
+        c->vpos[ch] = vp;
     }
     if (ramping) {
-        for (int k = 0; k < 3; k++) {
+        for (int k = 0; k < N_RAMPS; k++) {
             ramps_t *rp = &c->ramps[k];
             for (int ch = 0; ch < c->channels; ch++) rp->pos[ch] = fmin(rp->pos[ch] + (double)m, rp->len[ch]);
+        }
+    }
+    for (int ch = 0; ch < c->channels; ch++) {
+        if (!c->vbuf[ch]) continue;
+        const ramps_t *vr = &c->ramps[R_VOICE];
+        if (c->vpos[ch] >= c->vlen[ch] || (c->vstop[ch] && vr->pos[ch] >= vr->len[ch])) {
+            c->vbuf[ch] = NULL;
+            STORE_REL(&c->vid[ch], 0);
         }
     }
 }
@@ -345,6 +430,13 @@ static void render_block(Core *c, float *out, int64_t stride, const int *colmap,
     }
     if (fired) STORE_REL(&c->sched_done, c->sched_done + fired);
     if (s < frames) segment(c, out, stride, colmap, s, frames, start + s);
+    int nch = c->channels;
+    for (int64_t j = 0; j < frames; j++) {
+        float *row = c->tap + ((start + j) & (TAP_FRAMES - 1)) * nch;
+        const float *src = out + j * stride;
+        for (int ch = 0; ch < nch; ch++) row[ch] = src[colmap[ch]];
+    }
+    STORE_REL(&c->tap_frame, end);
     STORE_REL(&c->frame, end);
 }
 
@@ -408,6 +500,7 @@ static void Core_dealloc(Core *self) {
     if (self->peaks_buf.obj) PyBuffer_Release(&self->peaks_buf);
     PyMem_RawFree(self->ring);
     PyMem_RawFree(self->heap);
+    PyMem_RawFree(self->tap);
     if (self->plock) PyThread_free_lock(self->plock);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
@@ -470,8 +563,8 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
     self->max_block = max_block;
     double b0 = fmin(fmax(init_b, lo), hi);
     for (int ch = 0; ch < self->channels; ch++) {
-        double init[3] = {init_k, b0, 1.0};
-        for (int k = 0; k < 3; k++) {
+        double init[N_RAMPS] = {init_k, b0, 1.0, 0.0};
+        for (int k = 0; k < N_RAMPS; k++) {
             self->ramps[k].start[ch] = init[k];
             self->ramps[k].delta[ch] = 0.0;
             self->ramps[k].pos[ch] = 1.0;
@@ -490,10 +583,12 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
     self->identity = 1;
     self->ring_cap = ring_cap;
     self->sched_cap = sched_cap;
+    self->vfade = fmax(1.0, nearbyint(VOICE_FADE_S * fs));
     self->ring = PyMem_RawCalloc((size_t)ring_cap, sizeof(cmd_t));
     self->heap = PyMem_RawCalloc((size_t)sched_cap, sizeof(cmd_t));
+    self->tap = PyMem_RawCalloc((size_t)TAP_FRAMES * (size_t)self->channels, sizeof(float));
     self->plock = PyThread_allocate_lock();
-    if (!self->ring || !self->heap || !self->plock) {
+    if (!self->ring || !self->heap || !self->tap || !self->plock) {
         PyErr_NoMemory();
         return -1;
     }
@@ -502,11 +597,22 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
 
 static PyObject *Core_push(Core *self, PyObject *args) {
     cmd_t cmd;
-    unsigned long long mask;
-    long long at;
-    if (!PyArg_ParseTuple(args, "iiddKL", &cmd.kind, &cmd.arg, &cmd.value, &cmd.glide, &mask, &at)) return NULL;
+    memset(&cmd, 0, sizeof cmd);
+    unsigned long long mask, ptr = 0;
+    long long at, ival = 0;
+    int layer = 0;
+    if (!PyArg_ParseTuple(args, "iiddKL|iKL", &cmd.kind, &cmd.arg, &cmd.value, &cmd.glide, &mask, &at, &layer, &ptr,
+                          &ival))
+        return NULL;
+    if (layer < 0 || layer >= VS_LAYERS || ival < 0) {
+        PyErr_SetString(PyExc_ValueError, "layer out of range or negative length");
+        return NULL;
+    }
     cmd.mask = mask;
     cmd.at = at;
+    cmd.layer = layer;
+    cmd.ptr = (const float *)(uintptr_t)ptr;
+    cmd.ival = ival;
     int64_t seq = 0;
     int rc = core_push(self, &cmd, &seq);
     if (rc != PUSH_OK) return PyLong_FromLong(-rc);
@@ -574,6 +680,70 @@ static PyObject *Core_knob_values(Core *self, PyObject *unused) {
             return NULL;
         }
         PyList_SET_ITEM(list, ch, t);
+    }
+    return list;
+}
+
+/* Copy the newest `frames` output frames into out (float32 (frames, channels)); returns the stream
+ * frame just after the last one copied. Retries when the audio thread overwrote the span mid-copy. */
+static PyObject *Core_read_tap(Core *self, PyObject *arg) {
+    Py_buffer view;
+    if (PyObject_GetBuffer(arg, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE | PyBUF_ND) < 0) return NULL;
+    int64_t frames = view.ndim == 2 ? view.shape[0] : -1;
+    if (view.ndim != 2 || strcmp(view.format, "f") != 0 || view.shape[1] != self->channels || frames > TAP_FRAMES / 2) {
+        PyBuffer_Release(&view);
+        PyErr_Format(PyExc_ValueError, "out must be float32 (frames <= %d, channels)", TAP_FRAMES / 2);
+        return NULL;
+    }
+    float *out = (float *)view.buf;
+    int nch = self->channels;
+    int64_t end = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (int attempt = 0; attempt < 8; attempt++) {
+        end = LOAD_ACQ(&self->tap_frame);
+        int64_t first = end - frames;
+        for (int64_t j = 0; j < frames; j++) {
+            int64_t f = first + j;
+            if (f < 0) {
+                memset(out + j * nch, 0, sizeof(float) * (size_t)nch);
+            } else {
+                memcpy(out + j * nch, self->tap + (f & (TAP_FRAMES - 1)) * nch, sizeof(float) * (size_t)nch);
+            }
+        }
+        /* Frames first.. are intact if the writer has not wrapped onto them meanwhile. */
+        if (LOAD_ACQ(&self->tap_frame) - first <= TAP_FRAMES) break;
+    }
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&view);
+    return PyLong_FromLongLong(end);
+}
+
+/* Sequence number of the voice each channel plays (0 = none). */
+static PyObject *Core_voice_ids(Core *self, PyObject *unused) {
+    PyObject *list = PyList_New(self->channels);
+    if (!list) return NULL;
+    for (int ch = 0; ch < self->channels; ch++) {
+        PyObject *v = PyLong_FromLongLong(LOAD_ACQ(&self->vid[ch]));
+        if (!v) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, ch, v);
+    }
+    return list;
+}
+
+/* The layer driving each channel's knobs, as the audio thread last applied it. */
+static PyObject *Core_layers(Core *self, PyObject *unused) {
+    PyObject *list = PyList_New(self->channels);
+    if (!list) return NULL;
+    for (int ch = 0; ch < self->channels; ch++) {
+        PyObject *v = PyLong_FromLong(*(volatile int32_t *)&self->top[ch]);
+        if (!v) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, ch, v);
     }
     return list;
 }
@@ -657,11 +827,16 @@ static PyGetSetDef Core_getset[] = {
 
 static PyMethodDef Core_methods[] = {
     {"push", (PyCFunction)Core_push, METH_VARARGS,
-     "push(kind, arg, value, glide, mask, at) -> seq > 0, or -1 (ring full) / -2 (schedule full)"},
+     "push(kind, arg, value, glide, mask, at[, layer, ptr, length]) -> seq > 0, or -1 (ring full) / -2 (schedule "
+     "full)"},
     {"render_into", (PyCFunction)Core_render_into, METH_O, "render_into(out float32 (frames, channels)); GIL released"},
     {"set_output_map", (PyCFunction)Core_set_output_map, METH_VARARGS,
      "set_output_map(device_channels, columns): where each engine channel goes in the callback's buffer"},
     {"knob_values", (PyCFunction)Core_knob_values, METH_NOARGS, "[(intensity, balance, muted)] per channel"},
+    {"read_tap", (PyCFunction)Core_read_tap, METH_O,
+     "read_tap(out float32 (frames, channels)) -> end frame: the newest output frames"},
+    {"voice_ids", (PyCFunction)Core_voice_ids, METH_NOARGS, "[seq of the playing voice or 0] per channel"},
+    {"layers", (PyCFunction)Core_layers, METH_NOARGS, "[layer driving the knobs] per channel"},
     {"take_peak", (PyCFunction)Core_take_peak, METH_NOARGS, "peak load since the last call (and reset it)"},
     {"add_underflows", (PyCFunction)Core_add_underflows, METH_O, "count underflows seen by another output"},
     {"run_callback", (PyCFunction)Core_run_callback, METH_VARARGS,
@@ -697,6 +872,12 @@ PyMODINIT_FUNC PyInit__core(void) {
     PyModule_AddIntConstant(m, "CMD_GLIDE", CMD_GLIDE);
     PyModule_AddIntConstant(m, "CMD_MUTE", CMD_MUTE);
     PyModule_AddIntConstant(m, "CMD_PANIC", CMD_PANIC);
+    PyModule_AddIntConstant(m, "CMD_LAYER", CMD_LAYER);
+    PyModule_AddIntConstant(m, "CMD_CANCEL", CMD_CANCEL);
+    PyModule_AddIntConstant(m, "CMD_VOICE", CMD_VOICE);
+    PyModule_AddIntConstant(m, "CMD_VOICE_STOP", CMD_VOICE_STOP);
+    PyModule_AddIntConstant(m, "LAYERS", VS_LAYERS);
+    PyModule_AddIntConstant(m, "TAP_FRAMES", TAP_FRAMES);
     PyModule_AddIntConstant(m, "MAX_CHANNELS", MAXCH);
     PyModule_AddIntConstant(m, "DRAIN_MAX", DRAIN_MAX);
     PyModule_AddObject(m, "_C_API", PyCapsule_New(&core_api, VS_CORE_CAPSULE, NULL));

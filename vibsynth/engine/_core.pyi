@@ -9,6 +9,12 @@ CMD_KNOB: int
 CMD_GLIDE: int
 CMD_MUTE: int
 CMD_PANIC: int
+CMD_LAYER: int
+CMD_CANCEL: int
+CMD_VOICE: int
+CMD_VOICE_STOP: int
+LAYERS: int
+TAP_FRAMES: int
 MAX_CHANNELS: int
 DRAIN_MAX: int
 _C_API: object
@@ -46,7 +52,22 @@ class Core:
         ring_capacity: int,
         schedule_capacity: int,
     ) -> None: ...
-    def push(self, kind: int, arg: int, value: float, glide: float, mask: int, at: int, /) -> int: ...
+    def push(
+        self,
+        kind: int,
+        arg: int,
+        value: float,
+        glide: float,
+        mask: int,
+        at: int,
+        layer: int = 0,
+        ptr: int = 0,
+        length: int = 0,
+        /,
+    ) -> int: ...
+    def read_tap(self, out: NDArray[np.float32], /) -> int: ...
+    def voice_ids(self) -> list[int]: ...
+    def layers(self) -> list[int]: ...
     def render_into(self, out: NDArray[np.float32], /) -> None: ...
     def set_output_map(self, device_channels: int, columns: Sequence[int], /) -> None: ...
     def knob_values(self) -> list[tuple[float, float, bool]]: ...

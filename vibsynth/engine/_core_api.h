@@ -7,7 +7,17 @@
 #define VIBSYNTH_CORE_API_H
 #include <stdint.h>
 
-enum { CMD_KNOB = 1, CMD_GLIDE = 2, CMD_MUTE = 3, CMD_PANIC = 4 };
+enum {
+    CMD_KNOB = 1,   /* glide a knob of the channels whose top layer is cmd.layer */
+    CMD_GLIDE = 2,
+    CMD_MUTE = 3,
+    CMD_PANIC = 4,
+    CMD_LAYER = 5,  /* arg = the layer that now drives the channels' knobs */
+    CMD_CANCEL = 6, /* arg = layer: drop that layer's commands submitted before this one (immediate only) */
+    CMD_VOICE = 7,  /* ptr/ival = float32 samples/length: play once; ptr NULL = set the playing voice's gain */
+    CMD_VOICE_STOP = 8
+};
+#define VS_LAYERS 4 /* 0 knobs, 1 sources, 2 clip, 3 reserved */
 enum { PUSH_OK = 0, PUSH_RING_FULL = 1, PUSH_SCHEDULE_FULL = 2 };
 
 typedef struct {
@@ -18,6 +28,10 @@ typedef struct {
     uint64_t mask;    /* channels, bit c = channel c */
     int64_t at;       /* stream frame, -1 = as soon as possible */
     int64_t seq;
+    int32_t layer;    /* CMD_KNOB: the control layer that sent it (0 = direct knob control) */
+    int32_t reserved;
+    const float *ptr; /* CMD_VOICE: samples, kept alive by the producer until the voice is done */
+    int64_t ival;     /* CMD_VOICE: number of samples */
 } vs_cmd_t;
 
 struct vs_core;

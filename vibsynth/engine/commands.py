@@ -27,11 +27,17 @@ __all__ = [
     "SetGlide",
     "SetMute",
     "Panic",
+    "SetLayer",
+    "CancelLayer",
+    "LAYER_NAMES",
     "Command",
 ]
 
 KnobName = Literal["intensity", "balance"]
 KNOB_NAMES: tuple[KnobName, ...] = ("intensity", "balance")
+
+#: Control layers that may drive a channel's knobs, by increasing priority (index = engine layer).
+LAYER_NAMES: tuple[str, ...] = ("knobs", "sources", "clip")
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,6 +53,9 @@ class SetKnob:
     at_frame : int or None
     glide_s : float or None
         Glide for this move only (None: the channel's glide). 0 = jump.
+    layer : int
+        Index in :data:`LAYER_NAMES` of the control layer sending it; the move reaches only
+        the channels that layer drives when it applies (0 = direct knob control).
     """
 
     name: KnobName
@@ -54,6 +63,25 @@ class SetKnob:
     channels: tuple[int, ...] | None = None
     at_frame: int | None = None
     glide_s: float | None = None
+    layer: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class SetLayer:
+    """From ``at_frame`` on, control layer ``layer`` drives the channels' knobs (other layers' moves are ignored)."""
+
+    layer: int
+    channels: tuple[int, ...] | None = None
+    at_frame: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class CancelLayer:
+    """Drop every command of control layer ``layer`` submitted before this one, on the channels (immediate)."""
+
+    layer: int
+    channels: tuple[int, ...] | None = None
+    at_frame: None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,4 +109,4 @@ class Panic:
     at_frame: None = None
 
 
-Command = SetKnob | SetGlide | SetMute | Panic
+Command = SetKnob | SetGlide | SetMute | Panic | SetLayer | CancelLayer

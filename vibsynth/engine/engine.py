@@ -26,7 +26,15 @@ Per channel and per sample:
    hard clip at the ceiling guards against float rounding and never engages in
    practice.
 5. **Mute/panic**: mute is a third ramped gain (``mute_fade_s`` for a full fade);
-   panic glides every intensity to 0 over the mute fade and drops scheduled commands.
+   panic glides every intensity to 0 over the mute fade, drops scheduled commands, stops
+   voices and hands every channel back to direct knob control.
+6. **Layers**: one control layer at a time drives a channel's knobs (direct knobs, spatial
+   sources, clips: :data:`~vibsynth.engine.commands.LAYER_NAMES`); :class:`SetLayer` changes
+   it in stream order and a knob move reaches only the channels its layer drives when it
+   applies. :class:`CancelLayer` drops a layer's moves still waiting in the scheduler.
+7. **Voices**: :meth:`play_buffer` adds a recording, played once, to channels (ramped gain,
+   5 ms edge fades, then the limiter's final clip); the lab plays its stimuli this way.
+8. **Output tap**: :meth:`read_output` returns the newest rendered frames (meters, spectra).
 
 Commands
 --------
@@ -61,10 +69,10 @@ from numpy.typing import NDArray
 
 from vibsynth.engine import _core
 from vibsynth.engine.bank import NoiseBank
-from vibsynth.engine.commands import Command, Panic, SetGlide, SetKnob, SetMute
+from vibsynth.engine.commands import LAYER_NAMES, CancelLayer, Command, Panic, SetGlide, SetKnob, SetLayer, SetMute
 from vibsynth.errors import EngineBusyError, ParameterError, ScheduleFullError
 
-__all__ = ["Engine", "EngineStats", "KNOB_FADE_IN", "DEFAULT_SCHEDULE_CAPACITY"]
+__all__ = ["Engine", "EngineStats", "KNOB_FADE_IN", "DEFAULT_SCHEDULE_CAPACITY", "TAP_MAX_FRAMES", "MAX_VOICE_SECONDS"]
 
 #: Intensity knobs below this also fade linearly to silence (no step at 0).
 KNOB_FADE_IN = 0.01
@@ -76,6 +84,15 @@ DEFAULT_SCHEDULE_CAPACITY = 10_000
 RING_CAPACITY = 16_384
 
 _ALL_CHANNELS = (1 << 64) - 1
+
+#: Most frames :meth:`Engine.read_output` returns at once.
+TAP_MAX_FRAMES = _core.TAP_FRAMES // 2
+
+#: Longest recording :meth:`Engine.play_buffer` accepts (seconds).
+MAX_VOICE_SECONDS = 600.0
+
+#: Voice buffers kept alive at most (each until the audio thread no longer reads it).
+_MAX_VOICE_BUFFERS = 256
 
 
 class EngineStats:
@@ -227,6 +244,8 @@ class Engine:
             self.schedule_capacity,
         )
         self.stats = EngineStats(self._core)
+        # seq of a CMD_VOICE -> (samples, frame before which the audio thread may not have taken it)
+        self._voices: dict[int, tuple[NDArray[np.float32], int]] = {}
 
     # ------------------------------------------------------------------ control side
     def submit(self, command: Command) -> int:
@@ -252,12 +271,33 @@ class Engine:
             args = (_core.CMD_MUTE, int(bool(command.muted)), 0.0, math.nan)
         elif isinstance(command, Panic):
             args = (_core.CMD_PANIC, 0, 0.0, math.nan)
+        elif isinstance(command, SetLayer):
+            args = (_core.CMD_LAYER, self._layer_index(command.layer), 0.0, math.nan)
+        elif isinstance(command, CancelLayer):
+            args = (_core.CMD_CANCEL, self._layer_index(command.layer), 0.0, math.nan)
         else:
             raise ParameterError(f"not an engine command: {command!r}")
-        channels = getattr(command, "channels", None)
-        mask = _ALL_CHANNELS if channels is None else sum(1 << c for c in channels if 0 <= c < self.channels)
+        layer = self._layer_index(command.layer) if isinstance(command, SetKnob) else 0
         at = command.at_frame
-        seq = self._core.push(*args, mask, -1 if at is None else max(0, int(at)))
+        return self._push(args, getattr(command, "channels", None), at, layer)
+
+    @staticmethod
+    def _layer_index(layer: int) -> int:
+        if int(layer) != layer or not 0 <= layer < len(LAYER_NAMES):
+            raise ParameterError(f"layer must be 0..{len(LAYER_NAMES) - 1} ({', '.join(LAYER_NAMES)}), got {layer!r}")
+        return int(layer)
+
+    def _push(
+        self,
+        args: tuple[int, int, float, float],
+        channels: tuple[int, ...] | None,
+        at: int | None,
+        layer: int = 0,
+        ptr: int = 0,
+        length: int = 0,
+    ) -> int:
+        mask = _ALL_CHANNELS if channels is None else sum(1 << c for c in channels if 0 <= c < self.channels)
+        seq = self._core.push(*args, mask, -1 if at is None else max(0, int(at)), layer, ptr, length)
         if seq == -2:
             raise ScheduleFullError(
                 f"{self.schedule_capacity} timetagged commands are already waiting (engine.schedule_capacity)"
@@ -275,6 +315,130 @@ class Engine:
     def frame_position(self) -> int:
         """Frames rendered since the engine started (the stream clock of ``at_frame``)."""
         return self._core.frame
+
+    def layers(self) -> list[int]:
+        """The control layer driving each channel's knobs, as the audio thread last applied it."""
+        return self._core.layers()
+
+    # ------------------------------------------------------------------ voices
+    def play_buffer(
+        self,
+        samples: NDArray[np.floating],
+        *,
+        channels: tuple[int, ...] | list[int] | None = None,
+        gain: float = 1.0,
+        at_frame: int | None = None,
+    ) -> int:
+        """Play a mono recording once on channels, added to the texture (any thread; never blocks).
+
+        The samples are copied (float32) and kept alive until the audio thread is done with
+        them. A voice starts on its first sample at ``at_frame`` (exact; None = next block),
+        fades in and out over 5 ms at its edges, and replaces the voice a channel was
+        playing. The sum with the texture is clipped at the limiter ceiling.
+
+        Parameters
+        ----------
+        samples : ndarray, shape (n,)
+            At the engine's rate, at most :data:`MAX_VOICE_SECONDS` long.
+        channels : sequence of int, optional
+            0-based; None = every channel.
+        gain : float
+            Linear gain in [0, 16].
+        at_frame : int, optional
+
+        Returns
+        -------
+        voice : int
+            The voice id (its sequence number), as :meth:`voice_ids` reports it.
+        """
+        data = np.ascontiguousarray(np.asarray(samples, dtype=np.float32))
+        if data.ndim != 1 or data.size == 0:
+            raise ParameterError(f"a voice needs a non-empty mono recording (shape (n,)), got shape {data.shape}")
+        if data.size > MAX_VOICE_SECONDS * self.fs:
+            raise ParameterError(f"a voice may last at most {MAX_VOICE_SECONDS:g} s, got {data.size / self.fs:.1f} s")
+        if not np.all(np.isfinite(data)):
+            raise ParameterError("a voice's samples must be finite (no NaN or infinity)")
+        gain = self._voice_gain(gain)
+        chans = self._voice_channels(channels)
+        self._collect_voices()
+        if len(self._voices) >= _MAX_VOICE_BUFFERS:
+            raise EngineBusyError(f"{_MAX_VOICE_BUFFERS} voices are still playing or queued")
+        seq = self._push((_core.CMD_VOICE, 0, gain, math.nan), chans, at_frame, 0, data.ctypes.data, data.size)
+        due = self.frame_position if at_frame is None else max(int(at_frame), self.frame_position)
+        self._voices[seq] = (data, due)
+        return seq
+
+    def set_buffer_gain(
+        self, gain: float, *, channels: tuple[int, ...] | list[int] | None = None, glide_s: float = 0.01
+    ) -> None:
+        """Glide the gain of the voices channels are playing (does nothing where none plays)."""
+        glide = float(glide_s)
+        if not (math.isfinite(glide) and 0.0 <= glide <= 10.0):
+            raise ParameterError(f"voice gain glide must be in [0, 10] s, got {glide_s!r}")
+        self._push((_core.CMD_VOICE, 0, self._voice_gain(gain), glide), self._voice_channels(channels), None)
+
+    def stop_buffer(self, *, channels: tuple[int, ...] | list[int] | None = None) -> None:
+        """Fade out (5 ms) the voices channels are playing."""
+        self._push((_core.CMD_VOICE_STOP, 0, 0.0, math.nan), self._voice_channels(channels), None)
+
+    def voice_ids(self) -> list[int]:
+        """The voice each channel plays (the id :meth:`play_buffer` returned), 0 where none plays."""
+        return self._core.voice_ids()
+
+    def buffer_playing(self, channel: int) -> bool:
+        """Whether a voice plays on ``channel`` (0-based) now."""
+        if int(channel) != channel or not 0 <= channel < self.channels:
+            raise ParameterError(f"channel must be in 0..{self.channels - 1}, got {channel!r}")
+        return self._core.voice_ids()[int(channel)] != 0
+
+    @staticmethod
+    def _voice_gain(gain: float) -> float:
+        value = float(gain)
+        if not (math.isfinite(value) and 0.0 <= value <= 16.0):
+            raise ParameterError(f"voice gain must be in [0, 16], got {gain!r}")
+        return value
+
+    def _voice_channels(self, channels: tuple[int, ...] | list[int] | None) -> tuple[int, ...] | None:
+        if channels is None:
+            return None
+        chans = tuple(int(c) for c in channels)
+        if not chans or any(not 0 <= c < self.channels for c in chans):
+            raise ParameterError(f"voice channels must be in 0..{self.channels - 1}, got {list(channels)!r}")
+        return chans
+
+    def _collect_voices(self) -> None:
+        """Release the buffers the audio thread will not read again.
+
+        A buffer is done when its command was taken (``applied_seq``), its start frame has
+        passed (so it fired, or panic dropped it) and no channel's voice names it.
+        """
+        if not self._voices:
+            return
+        frame = self.frame_position  # read before the ids: a voice that fired is visible in them
+        applied = self.applied_seq
+        playing = set(self._core.voice_ids())
+        for seq, (_, due) in list(self._voices.items()):
+            if seq <= applied and frame > due and seq not in playing:
+                del self._voices[seq]
+
+    # ------------------------------------------------------------------ output tap
+    def read_output(self, frames: int) -> NDArray[np.float32]:
+        """The newest ``frames`` frames the engine rendered (zeros before the stream started).
+
+        Parameters
+        ----------
+        frames : int
+            1..:data:`TAP_MAX_FRAMES`.
+
+        Returns
+        -------
+        out : ndarray, shape (frames, channels), float32
+        """
+        if int(frames) != frames or not 1 <= frames <= TAP_MAX_FRAMES:
+            raise ParameterError(f"frames must be an integer in 1..{TAP_MAX_FRAMES}, got {frames!r}")
+        out = np.empty((int(frames), self.channels), dtype=np.float32)
+        self._core.read_tap(out)
+        return out
 
     def knob_values(self) -> list[tuple[float, float, bool]]:
         """Current (intensity, balance, muted) per channel, for status display (approximate while gliding)."""
