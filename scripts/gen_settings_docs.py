@@ -4,7 +4,9 @@
 * ``docs/config.md``: between ``<!-- generated: config-reference -->`` / ``actuator-reference``
   and ``<!-- end generated -->``;
 * ``docs/presets.md``: between ``<!-- generated: preset-reference -->`` and ``<!-- end generated -->``;
-* ``vibsynth/data/schema/{config,preset,actuator}.schema.json``.
+* ``docs/clips.md``: ``clip-reference``, ``clip-keyframe-reference``, ``clip-transient-reference``,
+  ``clip-loop-reference``;
+* ``vibsynth/data/schema/{config,preset,actuator,clip}.schema.json``.
 
 Usage::
 
@@ -28,6 +30,12 @@ from vibsynth.settings.schema import SCHEMAS, schema_text  # noqa: E402
 DOCS = {
     Path("docs/config.md"): ("config-reference", "actuator-reference"),
     Path("docs/presets.md"): ("preset-reference",),
+    Path("docs/clips.md"): (
+        "clip-reference",
+        "clip-keyframe-reference",
+        "clip-transient-reference",
+        "clip-loop-reference",
+    ),
 }
 
 

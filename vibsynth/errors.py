@@ -13,6 +13,7 @@ __all__ = [
     "InputError",
     "ConfigError",
     "PresetError",
+    "ClipError",
     "DeviceError",
     "CodecError",
     "MissingDependencyError",
@@ -41,6 +42,10 @@ class ConfigError(VibsynthError):
 
 class PresetError(VibsynthError):
     """A preset file is invalid or a preset name is unknown."""
+
+
+class ClipError(VibsynthError):
+    """A haptic clip (file, import, export) is invalid or a clip name is unknown."""
 
 
 class DeviceError(VibsynthError):

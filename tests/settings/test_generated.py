@@ -60,8 +60,9 @@ def test_docs_tables_hold_every_key_with_its_range_and_default():
     presets_md = (ROOT / "docs" / "presets.md").read_text(encoding="utf-8")
     assert "| `audio.rate` | integer | `48000` | an integer in [2400, 384000] Hz | sample rate |" in config_md
     assert "| `balance` | number | **required** | a number in [-4, 4] (knob units) |" in presets_md
+    clips_md = (ROOT / "docs" / "clips.md").read_text(encoding="utf-8")
     for name, model in SCHEMAS.items():
-        text = presets_md if name == "preset" else config_md
+        text = {"preset": presets_md, "clip": clips_md}.get(name, config_md)
         for key in model_spec(model).leaves:
             assert f"| `{key}` |" in text, (name, key)
 

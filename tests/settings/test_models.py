@@ -179,7 +179,16 @@ def NUMERIC(key: str) -> bool:
 
 SCALARS = [k for k in SPEC.leaves if random_value(k, np.random.default_rng(0)) is not None]
 # keys tied to others by the rules between keys are left out of the random configs
-TIED = {"bank.balance_min", "bank.balance_max", "knobs.balance_min", "knobs.balance_max", "knobs.initial_balance"}
+TIED = {
+    "bank.balance_min",
+    "bank.balance_max",
+    "knobs.balance_min",
+    "knobs.balance_max",
+    "knobs.initial_balance",
+    "clips.sharpness_0_balance",
+    "clips.sharpness_half_balance",
+    "clips.sharpness_1_balance",
+}
 
 
 @pytest.mark.parametrize("seed", range(5))

@@ -1,5 +1,10 @@
-"""The preset library: shipped presets (package data) merged with the user's folder (user wins),
-re-read with bounded work per poll (only files whose (mtime, size, inode) changed).
+"""Libraries of named settings files (presets, haptic clips): shipped files (package data) merged
+with the user's folder (user wins), re-read with bounded work per poll (only files whose
+(mtime, size, inode) changed).
+
+:class:`FileLibrary` does the folder work for any kind of file described by a :class:`LibraryKind`;
+:class:`PresetLibrary` adds what only presets have (MIDI program numbers), and
+:class:`vibsynth.settings.clips.ClipLibrary` is the clips' library.
 """
 
 from __future__ import annotations
@@ -16,8 +21,9 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import Generic, Protocol, TypeVar
 
-from vibsynth.errors import PresetError
+from vibsynth.errors import PresetError, VibsynthError
 from vibsynth.formats.files import size_limit_message
 from vibsynth.settings.config import Config
 from vibsynth.settings.models_preset import NAME_RULE
@@ -30,34 +36,92 @@ class UnknownPresetError(PresetError):
     """No preset (valid or broken) has this name: for a name typed on a command line, a usage error."""
 
 
+def shipped_dir(folder: str = "presets") -> Path:
+    """Folder of the files of a kind shipped as package data (``vibsynth/data/<folder>``)."""
+    return Path(str(resources.files("vibsynth.data").joinpath(folder)))
+
+
 def shipped_presets_dir() -> Path:
     """Folder of the presets shipped as package data (``vibsynth/data/presets``)."""
-    return Path(str(resources.files("vibsynth.data").joinpath("presets")))
+    return shipped_dir("presets")
 
 
-def default_user_dir() -> Path:
-    """Platform folder for user presets: ``presets/`` in the user data folder.
+def default_user_dir(folder: str = "presets") -> Path:
+    """Platform folder for user files of a kind: ``<folder>/`` in the user data folder.
 
-    Linux ``~/.local/share/vibsynth/presets`` (``$XDG_DATA_HOME``), macOS
+    For presets: Linux ``~/.local/share/vibsynth/presets`` (``$XDG_DATA_HOME``), macOS
     ``~/Library/Application Support/vibsynth/presets``, Windows
     ``%LOCALAPPDATA%\\vibsynth\\presets``.
     """
     import platformdirs
 
-    return Path(platformdirs.user_data_dir("vibsynth", appauthor=False)) / "presets"
+    return Path(platformdirs.user_data_dir("vibsynth", appauthor=False)) / folder
 
 
-def _files(folder: Path | None) -> list[Path]:
+class LibraryItem(Protocol):
+    """What a library holds: a named, loaded file (a preset, a clip)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def origin(self) -> str: ...
+
+    @property
+    def path(self) -> Path | None: ...
+
+
+T = TypeVar("T", bound=LibraryItem)
+
+
+@dataclass(frozen=True)
+class LibraryKind(Generic[T]):
+    """A kind of named settings file, for :class:`FileLibrary`.
+
+    Attributes
+    ----------
+    noun : str
+        ``"preset"``, ``"clip"``: used in every message (``unknown clip 'x'``).
+    what : str
+        ``"a preset"``: for size messages.
+    folder : str
+        Package data folder of the shipped files and name of the user folder (``presets``).
+    section : str
+        Config section holding ``user_dir`` (``presets``, ``clips``).
+    load : callable
+        ``load(path, origin=...) -> item``; raises ``error``.
+    save : callable
+        ``save(item, path) -> Path``.
+    error, unknown : exception classes
+        What a broken file raises; what :meth:`FileLibrary.get` raises for an unknown name.
+    max_bytes : int
+        Files over this size are never read.
+    suffix : str
+    """
+
+    noun: str
+    what: str
+    folder: str
+    section: str
+    load: Callable[..., T]
+    save: Callable[[T, Path], Path]
+    error: type[VibsynthError]
+    unknown: type[VibsynthError]
+    max_bytes: int
+    suffix: str = SUFFIX
+
+
+def _files(folder: Path | None, suffix: str = SUFFIX) -> list[Path]:
     if folder is None or not folder.is_dir():
         return []
-    return sorted(p for p in folder.iterdir() if p.name.endswith(SUFFIX) and not p.name.startswith(".") and p.is_file())
+    return sorted(p for p in folder.iterdir() if p.name.endswith(suffix) and not p.name.startswith(".") and p.is_file())
 
 
-#: (mtime_ns, size, inode) of a preset file: what the watcher compares. Nothing is read to
+#: (mtime_ns, size, inode) of a file: what the watcher compares. Nothing is read to
 #: make it; a file is re-read only when its signature changes.
 Signature = tuple[int, int, int]
 
-#: At most this many preset files per folder are used (bounded work per poll).
+#: At most this many files per folder are used (bounded work per poll).
 MAX_FILES_PER_FOLDER = 1000
 #: At most this many folder entries (any kind) are looked at per folder and poll.
 MAX_ENTRIES_PER_FOLDER = 20_000
@@ -72,24 +136,26 @@ RACY_NS = 2_000_000_000
 
 
 @dataclass
-class _FileState:
+class _FileState(Generic[T]):
     origin: str
     folder: Path
     signature: Signature
-    preset: Preset | None  # the version in use: the last good one
+    item: T | None  # the version in use: the last good one
     error: str | None  # why the file's current content is not in use
     recheck_ns: int | None  # wall-clock time of the one re-read of a racy file
 
 
-class PresetLibrary:
-    """Shipped presets plus a user folder; a user preset overrides a shipped one of the same name.
+class FileLibrary(Generic[T]):
+    """Shipped files plus a user folder; a user file overrides a shipped one of the same name.
 
     Parameters
     ----------
+    kind : LibraryKind
+        What the files are (presets, clips) and how to read them.
     shipped_dir : path-like or None
-        Default: :func:`shipped_presets_dir`. None = no shipped presets (tests).
+        Shipped files. None = none (tests).
     user_dir : path-like or None
-        User presets (need not exist yet).
+        User files (need not exist yet).
     load : bool
         Read the folders now.
 
@@ -104,24 +170,26 @@ class PresetLibrary:
     -----
     :meth:`reload` lists both folders and stats each ``*.yaml`` file (hidden files, such as
     the temporary files of atomic writes, are ignored); it reads a file only when its
-    (mtime, size, inode) changed, and never a file over :data:`MAX_PRESET_BYTES`. Problems
+    (mtime, size, inode) changed, and never a file over ``kind.max_bytes``. Problems
     (a file too large, a broken file, a folder that cannot be listed) are logged once when
     they appear, not at every poll, and a folder that can be listed again is reported once.
     """
 
     def __init__(
         self,
+        kind: LibraryKind[T],
         shipped_dir: str | os.PathLike[str] | None = None,
         user_dir: str | os.PathLike[str] | None = None,
         *,
         load: bool = True,
     ) -> None:
+        self.kind = kind
         self.shipped_dir = Path(shipped_dir) if shipped_dir is not None else None
         self.user_dir = Path(user_dir).expanduser() if user_dir is not None else None
         self._lock = threading.RLock()  # guards the published state (short holds only)
         self._reload_lock = threading.Lock()  # one reload at a time (watcher, save_user)
-        self._presets: dict[str, Preset] = {}
-        self._states: dict[Path, _FileState] = {}
+        self._items: dict[str, T] = {}
+        self._states: dict[Path, _FileState[T]] = {}
         self._reported: dict[str, str] = {}
         self._clock: Callable[[], int] = time.time_ns
         self.errors: dict[str, str] = {}
@@ -142,7 +210,8 @@ class PresetLibrary:
 
     # ----------------------------------------------------------------- scanning
     def _scan(self, folder: Path) -> dict[Path, Signature] | None:
-        """Signatures of a folder's preset files (stat only); None when it cannot be listed."""
+        """Signatures of a folder's files (stat only); None when it cannot be listed."""
+        noun, suffix = self.kind.noun, self.kind.suffix
         key = f"folder:{folder}"
         found: dict[Path, Signature] = {}
         entries = 0
@@ -155,12 +224,12 @@ class PresetLibrary:
                             f"entries:{folder}",
                             "many",
                             logging.WARNING,
-                            f"preset folder {folder}: more than {MAX_ENTRIES_PER_FOLDER} entries; only the "
+                            f"{noun} folder {folder}: more than {MAX_ENTRIES_PER_FOLDER} entries; only the "
                             f"first {MAX_ENTRIES_PER_FOLDER} are looked at",
                         )
                         break
                     name = entry.name
-                    if name.startswith(".") or not name.endswith(SUFFIX):
+                    if name.startswith(".") or not name.endswith(suffix):
                         continue
                     path = Path(entry.path)
                     try:
@@ -184,23 +253,23 @@ class PresetLibrary:
                             f"files:{folder}",
                             "many",
                             logging.WARNING,
-                            f"preset folder {folder}: more than {MAX_FILES_PER_FOLDER} preset files; "
+                            f"{noun} folder {folder}: more than {MAX_FILES_PER_FOLDER} {noun} files; "
                             f"only {MAX_FILES_PER_FOLDER} are used",
                         )
                         break
-        except FileNotFoundError:  # no folder is no presets (the user folder need not exist)
-            self._resolve(key, f"preset folder {folder}: gone; no presets from it")
+        except FileNotFoundError:  # no folder is no files (the user folder need not exist)
+            self._resolve(key, f"{noun} folder {folder}: gone; no {noun}s from it")
             return {}
         except OSError as exc:  # permission denied, symbolic link loop, not a folder
             self._report(
                 key,
                 f"errno {exc.errno}",
                 logging.WARNING,
-                f"preset folder {folder}: cannot list it ({_why(exc)}); keeping the presets read from "
+                f"{noun} folder {folder}: cannot list it ({_why(exc)}); keeping the {noun}s read from "
                 "it before until it can be listed again",
             )
             return None
-        self._resolve(key, f"preset folder {folder}: can be listed again")
+        self._resolve(key, f"{noun} folder {folder}: can be listed again")
         if entries <= MAX_ENTRIES_PER_FOLDER:
             self._reported.pop(f"entries:{folder}", None)
         if len(found) < MAX_FILES_PER_FOLDER:
@@ -208,7 +277,7 @@ class PresetLibrary:
         return found
 
     def snapshot(self) -> dict[str, Signature]:
-        """Signature (mtime_ns, size, inode) of every preset file in both folders (nothing is read)."""
+        """Signature (mtime_ns, size, inode) of every file in both folders (nothing is read)."""
         out: dict[str, Signature] = {}
         with self._reload_lock:
             for folder in (self.shipped_dir, self.user_dir):
@@ -222,7 +291,7 @@ class PresetLibrary:
 
         Only files whose (mtime, size, inode) changed are read. A file that fails to load
         keeps its last good version (if any); its error is logged once and recorded in
-        :attr:`errors`. A file over :data:`MAX_PRESET_BYTES` is never read.
+        :attr:`errors`. A file over ``kind.max_bytes`` is never read.
 
         Parameters
         ----------
@@ -236,9 +305,10 @@ class PresetLibrary:
         changes : dict of str to str
             Name -> ``"added"``, ``"changed"`` or ``"removed"`` for every effective change.
         """
+        kind = self.kind
         with self._reload_lock:
             old = self._states
-            states: dict[Path, _FileState] = {}
+            states: dict[Path, _FileState[T]] = {}
             now = self._clock()
             n_read = bytes_read = 0
             for origin, folder in (("shipped", self.shipped_dir), ("user", self.user_dir)):
@@ -257,11 +327,11 @@ class PresetLibrary:
                     ):
                         states[path] = previous
                         continue
-                    last_good = previous.preset if previous is not None else None
+                    last_good = previous.item if previous is not None else None
                     keeping = "; keeping the last good version" if last_good is not None else ""
                     size = signature[1]
-                    if size > MAX_PRESET_BYTES:
-                        message = size_limit_message(path, size, MAX_PRESET_BYTES, WHAT)
+                    if size > kind.max_bytes:
+                        message = size_limit_message(path, size, kind.max_bytes, kind.what)
                         self._report(f"file:{path}", "too large", logging.WARNING, f"{message}; skipped{keeping}")
                         states[path] = _FileState(origin, folder, signature, last_good, message, None)
                         continue
@@ -276,95 +346,161 @@ class PresetLibrary:
                     bytes_read += size
                     recheck = signature[0] + RACY_NS if now - signature[0] < RACY_NS else None
                     try:
-                        preset = load_preset(path, origin=origin)
-                    except PresetError as exc:
+                        item = kind.load(path, origin=origin)
+                    except kind.error as exc:
                         skipped = keeping or "; skipped until the file is fixed"
                         self._report(f"file:{path}", str(exc), logging.WARNING, f"{exc}{skipped}")
                         states[path] = _FileState(origin, folder, signature, last_good, str(exc), recheck)
                     else:
                         self._resolve(f"file:{path}")
-                        states[path] = _FileState(origin, folder, signature, preset, None, recheck)
+                        states[path] = _FileState(origin, folder, signature, item, None, recheck)
             for path in old.keys() - states.keys():  # gone: a new problem with it is news again
                 self._resolve(f"file:{path}")
             if states.keys() == old.keys() and all(states[p] is old[p] for p in states):
                 return {}
             return self._publish(states)
 
-    def _publish(self, states: dict[Path, _FileState]) -> dict[str, str]:
-        presets: dict[str, Preset] = {}
-        ordered = sorted(states.items(), key=lambda item: (item[1].origin != "shipped", str(item[0])))
+    def _publish(self, states: dict[Path, _FileState[T]]) -> dict[str, str]:
+        items: dict[str, T] = {}
+        ordered = sorted(states.items(), key=lambda entry: (entry[1].origin != "shipped", str(entry[0])))
         for path, state in ordered:  # shipped first, then user: user wins
-            preset = state.preset
-            if preset is None:
+            item = state.item
+            if item is None:
                 continue
-            if preset.name in presets and presets[preset.name].origin == preset.origin:
+            if item.name in items and items[item.name].origin == item.origin:
                 self._report(
-                    f"twice:{preset.name}",
+                    f"twice:{item.name}",
                     str(path),
                     logging.WARNING,
-                    f"{path}: preset {preset.name!r} defined twice; using {presets[preset.name].path}",
+                    f"{path}: {self.kind.noun} {item.name!r} defined twice; using {items[item.name].path}",
                 )
                 continue
-            presets[preset.name] = preset
+            items[item.name] = item
         errors = {str(p): s.error for p, s in ordered if s.error is not None}
         with self._lock:
-            previous = self._presets
-            self._presets, self._states, self.errors = presets, states, errors
+            previous = self._items
+            self._items, self._states, self.errors = items, states, errors
         changes: dict[str, str] = {}
-        for name in previous.keys() | presets.keys():
-            if name not in presets:
+        for name in previous.keys() | items.keys():
+            if name not in items:
                 changes[name] = "removed"
             elif name not in previous:
                 changes[name] = "added"
-            elif previous[name] != presets[name]:
+            elif previous[name] != items[name]:
                 changes[name] = "changed"
         return dict(sorted(changes.items()))
 
     # ----------------------------------------------------------------- queries
     def names(self) -> list[str]:
-        """Sorted preset names."""
+        """Sorted names."""
         with self._lock:
-            return sorted(self._presets)
+            return sorted(self._items)
 
-    def presets(self) -> list[Preset]:
-        """Every effective preset, sorted by name."""
+    def items(self) -> list[T]:
+        """Every effective item (preset, clip), sorted by name."""
         with self._lock:
-            return [self._presets[n] for n in sorted(self._presets)]
+            return [self._items[n] for n in sorted(self._items)]
 
     def __contains__(self, name: object) -> bool:
         with self._lock:
-            return name in self._presets
+            return name in self._items
 
     def __len__(self) -> int:
         with self._lock:
-            return len(self._presets)
+            return len(self._items)
 
-    def get(self, name: str) -> Preset:
-        """A preset by name.
+    def get(self, name: str) -> T:
+        """An item by name.
 
         Raises
         ------
-        PresetError
-            Unknown name; the message lists close names.
+        VibsynthError
+            ``kind.error`` with the file's own error when the file of that name is broken;
+            ``kind.unknown`` for an unknown name (the message lists close names).
         """
+        noun = self.kind.noun
         with self._lock:
-            preset = self._presets.get(name)
-            names = sorted(self._presets)
-        if preset is not None:
-            return preset
-        broken = [message for path, message in self.errors.items() if Path(path).stem == name]
-        if broken:  # the preset's file exists but is invalid: say what is wrong with it
-            raise PresetError(broken[0])
+            item = self._items.get(name)
+            names = sorted(self._items)
+            user = sum(1 for p in self._items.values() if p.origin == "user")
+        if item is not None:
+            return item
+        suffix = self.kind.suffix
+        broken = [message for path, message in self.errors.items() if Path(path).name == name + suffix]
+        if broken:  # the file exists but is invalid: say what is wrong with it
+            raise self.kind.error(broken[0])
         lowered = {n.lower(): n for n in names}
         near = [lowered[name.lower()]] if name.lower() in lowered else []
         near += [n for n in difflib.get_close_matches(name, names, n=4, cutoff=0.5) if n not in near]
         hint = f"; did you mean {', '.join(near)}?" if near else ""
-        with self._lock:
-            user = sum(1 for p in self._presets.values() if p.origin == "user")
         where = f"{len(names) - user} shipped, {user} in {self.user_dir}" if self.user_dir else "all shipped"
-        raise UnknownPresetError(
-            f"unknown preset {name!r}{hint} ({len(names)} presets: {where}; `vibsynth preset list` shows them)"
+        raise self.kind.unknown(
+            f"unknown {noun} {name!r}{hint} ({len(names)} {noun}s: {where}; `vibsynth {noun} list` shows them)"
         )
+
+    def user_path(self, name: str) -> Path:
+        """Where a user file of this name is (or would be) stored."""
+        noun = self.kind.noun
+        if not re.fullmatch(NAME_PATTERN, name):
+            raise self.kind.error(f"{noun} name {name!r}: must be {NAME_RULE}")
+        if self.user_dir is None:
+            raise self.kind.error(f"no user {noun} folder configured ({self.kind.section}.user_dir)")
+        return self.user_dir / f"{name}{self.kind.suffix}"
+
+    def save_user(self, item: T, *, overwrite: bool = False) -> Path:
+        """Write an item into the user folder (atomically) and reload."""
+        path = self.user_path(item.name)
+        if path.exists() and not overwrite:
+            raise self.kind.error(f"{path}: exists already (use --force to replace it)")
+        self.kind.save(item, path)
+        self.reload()
+        return path
+
+
+def _save_preset(preset: Preset, path: Path) -> Path:
+    return save_preset(preset, path)
+
+
+PRESETS: LibraryKind[Preset] = LibraryKind(
+    noun="preset",
+    what=WHAT,
+    folder="presets",
+    section="presets",
+    load=load_preset,
+    save=_save_preset,
+    error=PresetError,
+    unknown=UnknownPresetError,
+    max_bytes=MAX_PRESET_BYTES,
+)
+
+
+class PresetLibrary(FileLibrary[Preset]):
+    """Shipped presets plus a user folder; a user preset overrides a shipped one of the same name.
+
+    Parameters
+    ----------
+    shipped_dir : path-like or None
+        Default: :func:`shipped_presets_dir`. None = no shipped presets (tests).
+    user_dir : path-like or None
+        User presets (need not exist yet).
+    load : bool
+        Read the folders now.
+
+    See :class:`FileLibrary` for reloading and errors.
+    """
+
+    def __init__(
+        self,
+        shipped_dir: str | os.PathLike[str] | None = None,
+        user_dir: str | os.PathLike[str] | None = None,
+        *,
+        load: bool = True,
+    ) -> None:
+        super().__init__(PRESETS, shipped_dir, user_dir, load=load)
+
+    def presets(self) -> list[Preset]:
+        """Every effective preset, sorted by name."""
+        return self.items()
 
     def program_map(self) -> dict[int, str]:
         """MIDI program -> preset name.
@@ -372,8 +508,7 @@ class PresetLibrary:
         Presets with a ``program`` field take it (on a clash the user preset, then the
         first name, wins); the others fill the free numbers in name order.
         """
-        with self._lock:
-            presets = [self._presets[n] for n in sorted(self._presets)]
+        presets = self.items()
         out: dict[int, str] = {}
         explicit = sorted((p for p in presets if p.program is not None), key=lambda p: (p.origin != "user", p.name))
         for p in explicit:
@@ -401,30 +536,16 @@ class PresetLibrary:
             raise PresetError(f"no preset for program {program} ({len(self)} presets)")
         return self.get(name)
 
-    def user_path(self, name: str) -> Path:
-        """Where a user preset of this name is (or would be) stored."""
-        if not re.fullmatch(NAME_PATTERN, name):
-            raise PresetError(f"preset name {name!r}: must be {NAME_RULE}")
-        if self.user_dir is None:
-            raise PresetError("no user preset folder configured (presets.user_dir)")
-        return self.user_dir / f"{name}{SUFFIX}"
 
-    def save_user(self, preset: Preset, *, overwrite: bool = False) -> Path:
-        """Write a preset into the user folder (atomically) and reload."""
-        path = self.user_path(preset.name)
-        if path.exists() and not overwrite:
-            raise PresetError(f"{path}: exists already (use --force to replace it)")
-        save_preset(preset, path)
-        self.reload()
-        return path
+def user_dir_of(config: Config | None, kind: LibraryKind[T]) -> Path:
+    """A kind's user folder for a config: ``<section>.user_dir``, or the platform folder."""
+    user_dir = config.section(kind.section).get("user_dir") if config is not None else None
+    return Path(user_dir).expanduser() if user_dir else default_user_dir(kind.folder)
 
 
 def load_library(config: Config | None = None) -> PresetLibrary:
     """The preset library for a config: shipped presets + ``presets.user_dir`` (or the platform folder)."""
-    user_dir = None
-    if config is not None:
-        user_dir = config.section("presets").get("user_dir")
-    return PresetLibrary(shipped_presets_dir(), Path(user_dir).expanduser() if user_dir else default_user_dir())
+    return PresetLibrary(shipped_presets_dir(), user_dir_of(config, PRESETS))
 
 
 def _why(exc: OSError) -> str:

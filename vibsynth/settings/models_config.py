@@ -13,9 +13,11 @@ from typing import Annotated, Any, Literal
 from pydantic import BeforeValidator, ConfigDict, Field, ValidationInfo, model_validator
 
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
+from vibsynth.settings.models_clip_config import Clips
 from vibsynth.settings.values import (
     BINDABLE_CC_MAX,
     CC_MAX,
+    KNOB_BALANCE_LIMIT,
     MIDI_CHANNELS,
     NRPN_MAX,
     Points,
@@ -143,8 +145,10 @@ class Knobs(Section):
         ge=1,
         le=1_000_000,
     )
-    balance_min: float = setting(-3.5, "live controls are limited to this range", unit="(knob units)", ge=-10, le=0)
-    balance_max: float = setting(3.5, "top of the live balance range", unit="(knob units)", ge=0, le=10)
+    balance_min: float = setting(
+        -3.5, "live controls are limited to this range", unit="(knob units)", ge=-KNOB_BALANCE_LIMIT, le=0
+    )
+    balance_max: float = setting(3.5, "top of the live balance range", unit="(knob units)", ge=0, le=KNOB_BALANCE_LIMIT)
     initial_intensity: float = setting(0.0, "silent until a control arrives", ge=0, le=1)
     initial_balance: float = setting(0.0, "balance before any control arrives", unit="(knob units)", ge=-10, le=10)
 
@@ -353,6 +357,7 @@ class VibsynthConfig(SettingsModel):
     midi: Midi = Field(default_factory=Midi, description="the MIDI input")
     speed: Speed = Field(default_factory=Speed, description="OSC /speed (mm/s) -> texture")
     presets: Presets = Field(default_factory=Presets, description="user presets and hot reload")
+    clips: Clips = Field(default_factory=Clips, description="haptic clips: user folder, hot reload, AHAP/Meta mapping")
     layout: Annotated[dict[int, ChannelPosition] | None, BeforeValidator(_check_layout)] = setting(
         None,
         "where each output channel's actuator is: {channel: {x, y, z, name}} in metres; null = no layout",

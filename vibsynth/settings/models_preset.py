@@ -22,6 +22,8 @@ __all__ = [
     "TAG_PATTERN",
     "MAX_TAGS",
     "MAX_DESCRIPTION",
+    "Tags",
+    "TAGS_ALLOWED",
     "PresetModel",
     "ActuatorProfileModel",
 ]
@@ -47,6 +49,18 @@ def _tags_list(value: Any) -> Any:
     if value is not None and not isinstance(value, list):
         raise problem("must be a list of short words")
     return value
+
+
+#: A list of tags (presets, clips): short words to find files by; null = none.
+Tags = Annotated[
+    Annotated[
+        list[Annotated[str, Field(pattern=TAG_PATTERN, json_schema_extra={"x-allowed": _TAG_RULE})]],
+        Field(max_length=MAX_TAGS),
+    ]
+    | None,
+    BeforeValidator(_tags_list),
+]
+TAGS_ALLOWED = f"a list of up to {MAX_TAGS} tags ({_TAG_RULE})"
 
 
 class PresetModel(SettingsModel):
@@ -87,14 +101,7 @@ class PresetModel(SettingsModel):
     program: Annotated[int, Field(ge=0, le=MAX_PROGRAM)] | None = setting(
         None, "MIDI program number (program change selects the preset)"
     )
-    tags: Annotated[
-        Annotated[
-            list[Annotated[str, Field(pattern=TAG_PATTERN, json_schema_extra={"x-allowed": _TAG_RULE})]],
-            Field(max_length=MAX_TAGS),
-        ]
-        | None,
-        BeforeValidator(_tags_list),
-    ] = setting([], "short words to find presets by", allowed=f"a list of up to {MAX_TAGS} tags ({_TAG_RULE})")
+    tags: Tags = setting([], "short words to find presets by", allowed=TAGS_ALLOWED)
     provenance: dict[str, Any] | None = setting(
         None, "free-form mapping: where the numbers came from", allowed="a mapping (e.g. recording: file.wav)"
     )

@@ -255,15 +255,15 @@ _HEADER = "# vibsynth preset (schema: docs/presets.md). Edit freely; saved atomi
 
 def preset_to_yaml(preset: Preset, *, header: str = _HEADER) -> str:
     """YAML text of a preset (keys in schema order)."""
-    return header + _dump_block(preset.to_dict())
+    return header + dump_block(preset.to_dict())
 
 
-def _dump_block(data: Mapping[str, Any], indent: str = "") -> str:
+def dump_block(data: Mapping[str, Any], indent: str = "") -> str:
     """Block-style mapping at the top levels, short lists and leaf mappings inline: easy to hand-edit."""
     out = []
     for key, value in data.items():
         if isinstance(value, Mapping) and value:
-            out.append(f"{indent}{key}:\n" + _dump_block(value, indent + "  "))
+            out.append(f"{indent}{key}:\n" + dump_block(value, indent + "  "))
             continue
         text = dump_yaml(
             {key: value}, sort_keys=False, width=100, default_flow_style=None if isinstance(value, list) else False

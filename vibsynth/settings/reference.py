@@ -19,6 +19,7 @@ from pydantic import BaseModel
 
 from vibsynth.formats.yamlio import dump_yaml
 from vibsynth.settings.fields import JsonSchema, describe, resolve
+from vibsynth.settings.models_clip import ClipModel, KeyframeModel, LoopModel, TransientModel
 from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import ActuatorProfileModel, PresetModel
 from vibsynth.settings.validation import ModelSpec, model_spec
@@ -30,6 +31,10 @@ REFERENCES: dict[str, type[BaseModel]] = {
     "config-reference": VibsynthConfig,
     "preset-reference": PresetModel,
     "actuator-reference": ActuatorProfileModel,
+    "clip-reference": ClipModel,
+    "clip-keyframe-reference": KeyframeModel,
+    "clip-transient-reference": TransientModel,
+    "clip-loop-reference": LoopModel,
 }
 _END = "<!-- end generated -->"
 

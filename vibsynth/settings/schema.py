@@ -13,6 +13,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from vibsynth.settings.models_clip import ClipModel
 from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import ActuatorProfileModel, PresetModel
 
@@ -25,6 +26,7 @@ SCHEMAS: dict[str, type[BaseModel]] = {
     "config": VibsynthConfig,
     "preset": PresetModel,
     "actuator": ActuatorProfileModel,
+    "clip": ClipModel,
 }
 
 
@@ -35,7 +37,7 @@ def json_schema(model: type[BaseModel]) -> dict[str, Any]:
 
 
 def schema_text(name: str) -> str:
-    """The JSON Schema of ``config``, ``preset`` or ``actuator`` as text (what the shipped file holds)."""
+    """The JSON Schema of ``config``, ``preset``, ``actuator`` or ``clip`` as text (what the shipped file holds)."""
     return json.dumps(json_schema(SCHEMAS[name]), indent=2, ensure_ascii=False) + "\n"
 
 

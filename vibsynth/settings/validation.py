@@ -24,7 +24,7 @@ from typing import Any, Protocol, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
-from vibsynth.errors import ConfigError, PresetError, VibsynthError
+from vibsynth.errors import ClipError, ConfigError, PresetError, VibsynthError
 from vibsynth.settings.fields import CROSS_PROBLEM, PROBLEM, JsonSchema, Section, describe, explain, resolve, show
 
 __all__ = [
@@ -33,6 +33,7 @@ __all__ = [
     "FixedLocator",
     "InvalidConfigError",
     "InvalidPresetError",
+    "InvalidClipError",
     "Leaf",
     "ModelSpec",
     "model_spec",
@@ -95,9 +96,18 @@ class InvalidPresetError(PresetError):
         self.problems: list[Problem] = list(problems)
 
 
-_ERRORS: dict[type[Exception], type[InvalidConfigError] | type[InvalidPresetError]] = {
+class InvalidClipError(ClipError):
+    """A haptic clip file breaks the schema; ``problems`` lists every problem found."""
+
+    def __init__(self, message: str, problems: Sequence[Problem] = ()) -> None:
+        super().__init__(message)
+        self.problems: list[Problem] = list(problems)
+
+
+_ERRORS: dict[type[Exception], type[InvalidConfigError] | type[InvalidPresetError] | type[InvalidClipError]] = {
     ConfigError: InvalidConfigError,
     PresetError: InvalidPresetError,
+    ClipError: InvalidClipError,
 }
 
 

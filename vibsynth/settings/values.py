@@ -28,6 +28,7 @@ __all__ = [
     "CC_MAX",
     "BINDABLE_CC_MAX",
     "MIDI_CHANNELS",
+    "KNOB_BALANCE_LIMIT",
 ]
 
 NRPN_MAX = 16383
@@ -36,6 +37,9 @@ CC_MAX = 127
 #: off, reset controllers, all notes off, ...) that the mapper handles itself.
 BINDABLE_CC_MAX = 119
 MIDI_CHANNELS = 16
+#: The live balance range (knobs.balance_min/max) may be set at most this far out; clips hold
+#: balances within it.
+KNOB_BALANCE_LIMIT = 10.0
 _BINDING_KEYS = {"cc": (0, BINDABLE_CC_MAX), "channel": (1, MIDI_CHANNELS)}
 
 
