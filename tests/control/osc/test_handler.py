@@ -823,3 +823,18 @@ def test_notify_over_udp_pushes_changes_from_other_sources():
     finally:
         client.close()
         server.stop()
+
+
+def test_notify_reports_a_layer_taking_a_channel_over(ctl, peer):
+    now = [100.0]
+    notifier = Notifier(ctl, "/vibsynth", rate_hz=10.0, clock=lambda: now[0])
+    unsubscribe = ctl.subscribe(notifier.on_event)
+    send(OscHandler(ctl, notifier=notifier), peer, "/vibsynth/notify", 1)
+    notifier.pump()
+    peer.clear()
+    now[0] += 1.0
+    ctl.drive("clip", channels=[2], intensity=0.7, source="clip")
+    notifier.pump()
+    pushed = sorted((m.address, m.args) for m in peer.messages())
+    assert pushed == [("/vibsynth/ch/3/driver", ("clip",)), ("/vibsynth/ch/3/intensity", (pytest.approx(0.7),))]
+    unsubscribe()

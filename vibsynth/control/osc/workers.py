@@ -41,15 +41,17 @@ class PeerLike(Protocol):
 def setter_message(prefix: str, channel: int | None, name: str, value: object) -> bytes:
     """Encode a knob value in the form that would set it, e.g. ``/vibsynth/ch/2/intensity f``.
 
-    ``glide`` is in ms, ``mute`` an int 0/1, ``preset`` a string (``""`` = none).
+    ``glide`` is in ms, ``mute`` an int 0/1, ``preset`` a string (``""`` = none); ``driver``
+    (the layer driving the channel's knobs: knobs, sources or clip) is reported as a string,
+    though no client sets it.
     """
     base = prefix if channel is None else f"{prefix}/ch/{channel + 1}"
     if name == "glide":
         return encode_message(f"{base}/glide", (float(value) * 1000.0,), "f")  # type: ignore[arg-type]
     if name == "mute":
         return encode_message(f"{base}/mute", (int(bool(value)),), "i")
-    if name == "preset":
-        return encode_message(f"{base}/preset", ("" if value is None else str(value),), "s")
+    if name in ("preset", "driver"):
+        return encode_message(f"{base}/{name}", ("" if value is None else str(value),), "s")
     return encode_message(f"{base}/{name}", (float(value),), "f")  # type: ignore[arg-type]
 
 
