@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
 """Regenerate what is made from the settings models: the key tables of the docs and the JSON Schemas.
 
-* ``docs/config.md``: between ``<!-- generated: config-reference -->`` / ``actuator-reference``
+* ``docs/config.md``: between ``<!-- generated: config-reference -->`` / ``actuator-reference`` / ``layout-reference``
   and ``<!-- end generated -->``;
 * ``docs/presets.md``: between ``<!-- generated: preset-reference -->`` and ``<!-- end generated -->``;
 * ``docs/clips.md``: ``clip-reference``, ``clip-keyframe-reference``, ``clip-transient-reference``,
   ``clip-loop-reference``;
-* ``vibsynth/data/schema/{config,preset,actuator,clip}.schema.json``.
+* ``vibsynth/data/schema/{config,preset,actuator,clip,layout}.schema.json``.
 
 Usage::
 
@@ -28,7 +28,7 @@ from vibsynth.settings.schema import SCHEMAS, schema_text  # noqa: E402
 
 #: Document -> the generated blocks it holds.
 DOCS = {
-    Path("docs/config.md"): ("config-reference", "actuator-reference"),
+    Path("docs/config.md"): ("config-reference", "actuator-reference", "layout-reference"),
     Path("docs/presets.md"): ("preset-reference",),
     Path("docs/clips.md"): (
         "clip-reference",

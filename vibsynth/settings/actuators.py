@@ -16,7 +16,7 @@ from vibsynth.settings.models_preset import ActuatorProfileModel
 from vibsynth.settings.validation import did_you_mean, model_spec, validate
 from vibsynth.settings.yamldoc import read_yaml_file
 
-__all__ = ["ACTUATOR_RESOURCE", "user_profile_dir", "actuator_profiles", "load_actuator_profile"]
+__all__ = ["ACTUATOR_RESOURCE", "named_files", "user_profile_dir", "actuator_profiles", "load_actuator_profile"]
 
 ACTUATOR_RESOURCE = "config/actuators"
 
@@ -31,19 +31,25 @@ def shipped_profile_dir() -> Path:
     return Path(str(resources.files("vibsynth.data").joinpath(ACTUATOR_RESOURCE)))
 
 
-def actuator_profiles() -> dict[str, str]:
-    """Available actuator profiles: name -> file (user profiles override shipped ones)."""
+def named_files(shipped: Any, user: Path) -> dict[str, str]:
+    """The ``NAME.yaml`` files of a shipped folder (``resources.files(...)``) and a user folder: name -> file.
+
+    A user file overrides the shipped file of the same name; missing folders hold nothing.
+    """
     out: dict[str, str] = {}
-    shipped = resources.files("vibsynth.data").joinpath(ACTUATOR_RESOURCE)
     if shipped.is_dir():
         for item in shipped.iterdir():
             if item.name.endswith(".yaml"):
                 out[item.name[:-5]] = str(item)
-    user = user_profile_dir()
     if user.is_dir():
-        for item in user.glob("*.yaml"):
-            out[item.stem] = str(item)
+        for path in user.glob("*.yaml"):
+            out[path.stem] = str(path)
     return out
+
+
+def actuator_profiles() -> dict[str, str]:
+    """Available actuator profiles: name -> file (user profiles override shipped ones)."""
+    return named_files(resources.files("vibsynth.data").joinpath(ACTUATOR_RESOURCE), user_profile_dir())
 
 
 def read_actuator_profile(path: str | Path, name: str | None = None) -> ActuatorProfileModel:

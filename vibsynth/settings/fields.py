@@ -31,6 +31,7 @@ __all__ = [
     "cross_problem",
     "describe",
     "resolve",
+    "alternatives",
     "explain",
     "show",
     "fmt_number",
@@ -156,10 +157,18 @@ def resolve(schema: JsonSchema, defs: JsonSchema) -> JsonSchema:
     return schema
 
 
-def _branches(schema: JsonSchema) -> tuple[list[JsonSchema], bool]:
-    """Non-null alternatives of a schema and whether null is allowed."""
+def alternatives(schema: JsonSchema) -> list[JsonSchema]:
+    """The alternatives of a schema (``anyOf``/``oneOf``, nested ones flattened), or the schema itself."""
     options = schema.get("anyOf") or schema.get("oneOf")
     if not options:
+        return [schema]
+    return [inner for option in options for inner in alternatives(option)]
+
+
+def _branches(schema: JsonSchema) -> tuple[list[JsonSchema], bool]:
+    """Non-null alternatives of a schema and whether null is allowed."""
+    options = alternatives(schema)
+    if len(options) == 1 and options[0] is schema:
         return [schema], False
     return [o for o in options if o.get("type") != "null"], any(o.get("type") == "null" for o in options)
 

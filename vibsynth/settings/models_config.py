@@ -10,10 +10,11 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BeforeValidator, ConfigDict, Field, ValidationInfo, model_validator
+from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, ValidationInfo, model_validator
 
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
+from vibsynth.settings.models_sources import Sources, knob_conflict
 from vibsynth.settings.values import (
     BINDABLE_CC_MAX,
     CC_MAX,
@@ -49,6 +50,7 @@ __all__ = [
     "Speed",
     "Presets",
     "ChannelPosition",
+    "check_layout",
     "VibsynthConfig",
 ]
 
@@ -326,11 +328,12 @@ class ChannelPosition(ValueModel):
     )
 
 
-def _check_layout(value: Any) -> Any:
-    if value is None:
+def check_layout(value: Any) -> Any:
+    """A layout: null, a layout name (a string), or a mapping {channel: position} with unique names."""
+    if value is None or isinstance(value, str):
         return value
     if not isinstance(value, dict):
-        raise problem("must be a mapping {output channel (1-based): {x: m, y: m, z: m, name: text}}")
+        raise problem("must be a layout name or a mapping of positions")
     names: dict[str, Any] = {}
     for channel, position in value.items():
         if isinstance(channel, bool) or not isinstance(channel, int) or not 1 <= channel <= MAX_CHANNELS:
@@ -341,6 +344,11 @@ def _check_layout(value: Any) -> Any:
                 raise problem(f"channel {channel}: name {name!r} is already channel {names[name]}'s", channel)
             names[name] = channel
     return value
+
+
+def _layout_kind(value: Any) -> str:
+    """Which form a layout has: a name (string) or positions (a mapping); only that form's errors are shown."""
+    return "name" if isinstance(value, str) else "positions"
 
 
 class VibsynthConfig(SettingsModel):
@@ -358,12 +366,23 @@ class VibsynthConfig(SettingsModel):
     speed: Speed = Field(default_factory=Speed, description="OSC /speed (mm/s) -> texture")
     presets: Presets = Field(default_factory=Presets, description="user presets and hot reload")
     clips: Clips = Field(default_factory=Clips, description="haptic clips: user folder, hot reload, AHAP/Meta mapping")
-    layout: Annotated[dict[int, ChannelPosition] | None, BeforeValidator(_check_layout)] = setting(
+    layout: Annotated[
+        Annotated[
+            Annotated[str, Field(pattern=PROFILE_NAME), Tag("name")]
+            | Annotated[dict[int, ChannelPosition], Tag("positions")],
+            Discriminator(_layout_kind),
+        ]
+        | None,
+        BeforeValidator(check_layout),
+    ] = setting(
         None,
-        "where each output channel's actuator is: {channel: {x, y, z, name}} in metres; null = no layout",
-        allowed="null or a mapping {output channel 1..audio.channels: {x: m, y: m, z: m (default 0), name: text}}",
+        "where each output channel's actuator is: a layout name (glove, vest-back, wristband) or "
+        "{channel: {x, y, z, name}} in metres; null = no layout",
+        allowed="null, a layout name, or a mapping {output channel 1..audio.channels: "
+        "{x: m, y: m, z: m (default 0), name: text}}",
         schema={"propertyNames": {"pattern": "^[1-9][0-9]*$"}},
     )
+    sources: Sources = Field(default_factory=Sources, description="touch sources mixed onto the layout (docs/vr.md)")
 
     @model_validator(mode="after")
     def _cross_check(self, info: ValidationInfo) -> VibsynthConfig:
@@ -417,14 +436,13 @@ class VibsynthConfig(SettingsModel):
                     "midi.channel_map",
                     "audio.channels",
                 )
-        for channel in self.layout or {}:
-            if channel > channels:
-                raise cross_problem(
-                    f"layout: channel {channel} is placed but audio.channels = {channels} "
-                    f"(allowed: channels 1..{channels})",
-                    "layout",
-                    "audio.channels",
-                )
+        from vibsynth.settings.layouts import layout_problem  # it reads layout files, checked by this model
+
+        spatial_error = layout_problem(self, bool(context.get("check_files", True))) or knob_conflict(
+            self.sources, self.midi.mapping
+        )
+        if spatial_error is not None:
+            raise spatial_error
         profile = self.actuator.profile
         if profile is not None and self.actuator.response is None and context.get("check_files", True):
             from vibsynth.settings.actuators import actuator_profiles, user_profile_dir  # they read this model

@@ -20,6 +20,7 @@ from pydantic import BaseModel
 from vibsynth.formats.yamlio import dump_yaml
 from vibsynth.settings.fields import JsonSchema, describe, resolve
 from vibsynth.settings.models_clip import ClipModel, KeyframeModel, LoopModel, TransientModel
+from vibsynth.settings.layouts import LayoutFileModel
 from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import ActuatorProfileModel, PresetModel
 from vibsynth.settings.validation import ModelSpec, model_spec
@@ -35,6 +36,7 @@ REFERENCES: dict[str, type[BaseModel]] = {
     "clip-keyframe-reference": KeyframeModel,
     "clip-transient-reference": TransientModel,
     "clip-loop-reference": LoopModel,
+    "layout-reference": LayoutFileModel,
 }
 _END = "<!-- end generated -->"
 

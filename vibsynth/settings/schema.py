@@ -14,6 +14,7 @@ from typing import Any
 from pydantic import BaseModel
 
 from vibsynth.settings.models_clip import ClipModel
+from vibsynth.settings.layouts import LayoutFileModel
 from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import ActuatorProfileModel, PresetModel
 
@@ -27,6 +28,7 @@ SCHEMAS: dict[str, type[BaseModel]] = {
     "preset": PresetModel,
     "actuator": ActuatorProfileModel,
     "clip": ClipModel,
+    "layout": LayoutFileModel,
 }
 
 

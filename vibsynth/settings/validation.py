@@ -25,7 +25,17 @@ from typing import Any, Protocol, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from vibsynth.errors import ClipError, ConfigError, PresetError, VibsynthError
-from vibsynth.settings.fields import CROSS_PROBLEM, PROBLEM, JsonSchema, Section, describe, explain, resolve, show
+from vibsynth.settings.fields import (
+    CROSS_PROBLEM,
+    PROBLEM,
+    JsonSchema,
+    Section,
+    alternatives,
+    describe,
+    explain,
+    resolve,
+    show,
+)
 
 __all__ = [
     "Problem",
@@ -233,7 +243,7 @@ def _first_leaf(value: Any, path: tuple[str, ...]) -> tuple[str, ...]:
 def _sub_schema(schema: JsonSchema, part: str | int, value: Any, defs: JsonSchema) -> JsonSchema:
     """The schema of ``value[part]`` (through ``anyOf``: the alternative for the value's kind)."""
     schema = resolve(schema, defs)
-    for option in schema.get("anyOf", [schema]):
+    for option in alternatives(schema):
         option = resolve(option, defs)
         if isinstance(value, list) and option.get("type") == "array":
             prefix = option.get("prefixItems") or []
