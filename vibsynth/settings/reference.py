@@ -19,8 +19,8 @@ from pydantic import BaseModel
 
 from vibsynth.formats.yamlio import dump_yaml
 from vibsynth.settings.fields import JsonSchema, describe, resolve
-from vibsynth.settings.models_clip import ClipModel, KeyframeModel, LoopModel, TransientModel
 from vibsynth.settings.layouts import LayoutFileModel
+from vibsynth.settings.models_clip import ClipModel, KeyframeModel, LoopModel, TransientModel
 from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import ActuatorProfileModel, PresetModel
 from vibsynth.settings.validation import ModelSpec, model_spec

@@ -13,8 +13,8 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from vibsynth.settings.models_clip import ClipModel
 from vibsynth.settings.layouts import LayoutFileModel
+from vibsynth.settings.models_clip import ClipModel
 from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import ActuatorProfileModel, PresetModel
 
