@@ -833,6 +833,8 @@ namespace Vibsynth
         public const float BalanceLimit = 10f;
         /// <summary>Longest glide the server accepts, in ms.</summary>
         public const float MaxGlideMs = 10000f;
+        /// <summary>Source coordinates and radii are within this many metres (the server's limit, like its layouts').</summary>
+        public const float PositionLimit = 10f;
         /// <summary>Longest preset or clip name sent, in UTF-8 bytes.</summary>
         public const int MaxNameBytes = 1024;
 
@@ -904,6 +906,12 @@ namespace Vibsynth
                 throw new ArgumentOutOfRangeException(name, value, string.Format(CultureInfo.InvariantCulture,
                     "{0} must be > 0, got {1}", name, value));
             return value;
+        }
+
+        internal static float CheckRadius(float metres)
+        {
+            CheckPositive("radius (m)", metres);
+            return Check("radius (m)", metres, 0f, PositionLimit);
         }
 
         internal static string CheckName(string what, string name)
@@ -1046,15 +1054,15 @@ namespace Vibsynth
         /// <summary>Move a source (1..16) to (x, y) in the layout's frame, in metres (<c>pos f f</c>: z = 0).</summary>
         public void SourcePosition(int source, float x, float y)
         {
-            Send(SourceAddress(source, "pos"), "ff", Finite("x (m)", x),
-                Finite("y (m)", y));
+            Send(SourceAddress(source, "pos"), "ff", Check("x (m)", x, -PositionLimit, PositionLimit),
+                Check("y (m)", y, -PositionLimit, PositionLimit));
         }
 
         /// <summary>Move a source (1..16) to (x, y, z) in the layout's frame, in metres (it glides like a knob).</summary>
         public void SourcePosition(int source, float x, float y, float z)
         {
-            Send(SourceAddress(source, "pos"), "fff", Finite("x (m)", x),
-                Finite("y (m)", y), Finite("z (m)", z));
+            Send(SourceAddress(source, "pos"), "fff", Check("x (m)", x, -PositionLimit, PositionLimit),
+                Check("y (m)", y, -PositionLimit, PositionLimit), Check("z (m)", z, -PositionLimit, PositionLimit));
         }
 
         /// <summary>Set a source's intensity (0..1) and balance at once.</summary>
@@ -1082,10 +1090,10 @@ namespace Vibsynth
             Send(SourceAddress(source, "preset"), "s", CheckName("preset name", name));
         }
 
-        /// <summary>Set a source's radius in metres (> 0).</summary>
+        /// <summary>Set a source's radius in metres (> 0, at most 10; the server's <c>sources.radius</c> bounds it).</summary>
         public void SourceRadius(int source, float metres)
         {
-            Send(SourceAddress(source, "radius"), "f", CheckPositive("radius (m)", metres));
+            Send(SourceAddress(source, "radius"), "f", CheckRadius(metres));
         }
 
         /// <summary>Set a source's roll-off law.</summary>
@@ -1116,12 +1124,12 @@ namespace Vibsynth
         {
             var messages = new List<byte[]>();
             messages.Add(Osc.EncodeMessage(SourceAddress(source, "pos"), "fff", new object[] {
-                Finite("x (m)", x), Finite("y (m)", y),
-                Finite("z (m)", z) }));
+                Check("x (m)", x, -PositionLimit, PositionLimit), Check("y (m)", y, -PositionLimit, PositionLimit),
+                Check("z (m)", z, -PositionLimit, PositionLimit) }));
             messages.Add(Osc.EncodeMessage(SourceAddress(source, "texture"), "ff", new object[] {
                 Check("intensity", intensity, 0f, 1f), Check("balance", balance, -BalanceLimit, BalanceLimit) }));
             if (radius.HasValue)
-                messages.Add(Osc.EncodeMessage(SourceAddress(source, "radius"), "f", new object[] { CheckPositive("radius (m)", radius.Value) }));
+                messages.Add(Osc.EncodeMessage(SourceAddress(source, "radius"), "f", new object[] { CheckRadius(radius.Value) }));
             if (rolloff.HasValue)
                 messages.Add(Osc.EncodeMessage(SourceAddress(source, "rolloff"), "s", new object[] { RolloffName(rolloff.Value) }));
             messages.Add(Osc.EncodeMessage(SourceAddress(source, "on"), "i", new object[] { on ? 1 : 0 }));
