@@ -835,6 +835,14 @@ namespace Vibsynth
         public const float MaxGlideMs = 10000f;
         /// <summary>Source coordinates and radii are within this many metres (the server's limit, like its layouts').</summary>
         public const float PositionLimit = 10f;
+        /// <summary>Largest clip gain the server accepts.</summary>
+        public const float MaxClipGain = 4f;
+        /// <summary>Slowest clip playback rate the server accepts.</summary>
+        public const float MinClipRate = 0.05f;
+        /// <summary>Fastest clip playback rate the server accepts.</summary>
+        public const float MaxClipRate = 20f;
+        /// <summary>Most loop passes one play may ask for (0 = until stopped).</summary>
+        public const int MaxClipLoops = 10000;
         /// <summary>Longest preset or clip name sent, in UTF-8 bytes.</summary>
         public const int MaxNameBytes = 1024;
 
@@ -1140,9 +1148,10 @@ namespace Vibsynth
         /// <summary>Play a haptic clip on one channel: it drives the channel's knobs until it ends, then the channel glides back.</summary>
         /// <param name="channel">1-based channel.</param>
         /// <param name="name">Clip name (<c>vibsynth clip list</c>); the server refuses an unknown one.</param>
-        /// <param name="gain">Intensity scale (>= 0); null = the server's default (1).</param>
-        /// <param name="rate">Playback speed (> 0, 2 = twice as fast); null = 1. Needs a gain: 1 is sent when none is given.</param>
-        /// <param name="loops">How many times to play (>= 0; the server documents 0); null = the clip's own setting.</param>
+        /// <param name="gain">Intensity scale, 0..4 (the result is clamped to 1); null = 1.</param>
+        /// <param name="rate">Playback speed, 0.05..20 (2 = twice as fast); null = 1.</param>
+        /// <param name="loops">Passes through the clip's loop, 1..10 000, or 0 = until stopped; null = 1.</param>
+        /// <remarks>Only the arguments given are sent (a later one needs the earlier: 1 is sent for those missing).</remarks>
         public void PlayClip(int channel, string name, float? gain = null, float? rate = null, int? loops = null)
         {
             Emit(ClipMessage(ChannelAddress(channel, "play"), name, gain, rate, loops));
@@ -1173,18 +1182,19 @@ namespace Vibsynth
             args.Add(CheckName("clip name", name));
             if (gain.HasValue || rate.HasValue || loops.HasValue)
             {
-                args.Add(CheckAtLeast("gain", gain ?? 1f, 0f));
+                args.Add(Check("gain", gain ?? 1f, 0f, MaxClipGain));
                 tags.Append('f');
             }
             if (rate.HasValue || loops.HasValue)
             {
-                args.Add(CheckPositive("rate", rate ?? 1f));
+                args.Add(Check("rate", rate ?? 1f, MinClipRate, MaxClipRate));
                 tags.Append('f');
             }
             if (loops.HasValue)
             {
-                if (loops.Value < 0)
-                    throw new ArgumentOutOfRangeException("loops", loops.Value, "loops must be >= 0, got " + loops.Value.ToString(CultureInfo.InvariantCulture));
+                if (loops.Value < 0 || loops.Value > MaxClipLoops)
+                    throw new ArgumentOutOfRangeException("loops", loops.Value, string.Format(CultureInfo.InvariantCulture,
+                        "loops {0} is outside the allowed range [0, {1}] (0 = until stopped)", loops.Value, MaxClipLoops));
                 args.Add(loops.Value);
                 tags.Append('i');
             }

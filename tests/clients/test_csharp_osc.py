@@ -258,7 +258,7 @@ def _same(client: str, server: str) -> bool:
 def test_bad_arguments_raise_argument_exceptions_and_send_nothing(client_check):
     found = run_mono(client_check, "args", 9)  # the discard port: nothing is expected back
     bad = {k.removeprefix("bad."): v for k, v in found.items() if k.startswith("bad.")}
-    assert len(bad) == 37
+    assert len(bad) == 40
     for name, outcome in bad.items():
         assert outcome.startswith("ArgumentException: "), f"{name}: {outcome}"
     assert bad["intensity_nan"] == "ArgumentException: intensity must be a finite number, got NaN"
@@ -266,7 +266,10 @@ def test_bad_arguments_raise_argument_exceptions_and_send_nothing(client_check):
     assert bad["channel_zero"] == "ArgumentException: channel 0 is outside 1..64 (channels count from 1)"
     assert bad["source_17"] == "ArgumentException: source 17 is outside 1..16 (sources count from 1)"
     assert bad["speed_negative"] == "ArgumentException: speed (mm/s) must be >= 0, got -3"
-    assert bad["clip_rate_zero"] == "ArgumentException: rate must be > 0, got 0"
+    assert bad["clip_rate_zero"] == "ArgumentException: rate 0 is outside the allowed range [0.05, 20]"
+    assert bad["clip_loops_above"] == (
+        "ArgumentException: loops 10001 is outside the allowed range [0, 10000] (0 = until stopped)"
+    )
     assert bad["preset_null"] == "ArgumentException: preset name must not be null"
     assert found["sent_after_bad"] == "0"
-    assert found["sent_after_good"] == "14"  # the good calls each sent one packet
+    assert found["sent_after_good"] == "15"  # the good calls each sent one packet

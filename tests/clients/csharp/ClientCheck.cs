@@ -201,6 +201,9 @@ static class ClientCheck
                 Case("clip_rate_zero", () => client.PlayClip(1, "impact", 1f, 0f)),
                 Case("clip_rate_nan", () => client.PlayClipAll("impact", 1f, float.NaN)),
                 Case("clip_loops_negative", () => client.PlayClip(1, "impact", 1f, 1f, -1)),
+                Case("clip_loops_above", () => client.PlayClip(1, "impact", null, null, 10001)),
+                Case("clip_gain_above", () => client.PlayClipAll("impact", 4.5f)),
+                Case("clip_rate_above", () => client.PlayClip(2, "impact", 1f, 21f)),
                 Case("stop_release_negative", () => client.StopClip(1, -5f)),
                 Case("stop_all_release_nan", () => client.StopClipAll(float.NaN)),
                 Case("bundle_time_negative", () => client.At(-1.0)),
@@ -242,6 +245,7 @@ static class ClientCheck
             client.SetSource(2, 0f, 0f, 0f, 0.5f, 0f, 0.1f, Rolloff.Phantom, true);
             client.PlayClip(1, "impact");
             client.PlayClip(1, "impact", null, null, 0);
+            client.PlayClip(64, "impact", 4f, 0.05f, 10000);
             client.StopClip(1);
             client.StopClipAll(0f);
             Say("sent_after_good", client.Sent);
