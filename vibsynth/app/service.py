@@ -193,6 +193,34 @@ def _load_presets(config: Any) -> tuple[Any, Any]:
         return None, None
 
 
+def _studio(config: Any, args: Any, controller: Controller, library: Any, servers: list[Any]) -> Any:
+    """Start the studio (after the other adapters: it shows their status); None when disabled."""
+    from vibsynth.app.studio_tabs import studio_extensions
+    from vibsynth.control.studio import adapter as studio_adapter
+
+    studio = studio_adapter.create(
+        config,
+        args,
+        controller,
+        library,
+        servers=list(servers),
+        extensions=studio_extensions(config, controller, library),
+    )
+    if studio is not None:
+        studio.start()
+        servers.append(studio)
+    return studio
+
+
+def _announce_studio(studio: Any, args: Any, out: Any) -> None:
+    """Print the studio's URL line (with its token); ``vibsynth studio`` also opens a browser."""
+    from vibsynth.control.studio.adapter import open_in_browser
+
+    print(f"studio: {studio.url}", file=out, flush=True)
+    if getattr(args, "open_browser", False):
+        print(f"vibsynth: {open_in_browser(studio.url)}", file=out, flush=True)
+
+
 def serve(config: Any, args: Any, *, owns_process: bool = False) -> int:
     """Run the service until Ctrl-C/SIGTERM (or ``args.seconds``). Returns the exit code.
 
@@ -291,6 +319,7 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
             if server is not None:
                 server.start()
                 servers.append(server)
+        studio = _studio(config, args, controller, library, servers)
         if library is not None and watcher_cls is not None and settings.presets.watch:
             watcher = watcher_cls(library, on_change=lambda name: controller.reapply_preset(name), interval_s=0.5)
             watcher.start()
@@ -301,6 +330,8 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
         print(f"vibsynth: serving {engine.channels} channel(s) on {output.describe()}", file=out)
         for server in servers:
             print(f"vibsynth: {server.describe()}", file=out)
+        if studio is not None:
+            _announce_studio(studio, args, out)
         prefix = settings.osc.prefix.rstrip("/")
         silent = all(k == 0 for k, _, _ in engine.knob_values()) and not intensity
         hint = "silent until a control arrives; " if silent else ""

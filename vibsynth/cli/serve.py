@@ -40,6 +40,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    add_arguments(p)
+    p.set_defaults(func=run)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags of ``vibsynth serve`` (``vibsynth studio`` takes the same)."""
     from vibsynth.settings.config import add_config_arguments
 
     add_config_arguments(p)
@@ -72,7 +78,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     for module in adapter_modules():
         module.add_arguments(p)
-    p.set_defaults(func=run)
+    from vibsynth.control.studio import adapter as studio_adapter
+
+    studio_adapter.add_arguments(p)
 
 
 def _config(args: argparse.Namespace) -> Any:

@@ -15,6 +15,7 @@ from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, Val
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
 from vibsynth.settings.models_sources import Sources, knob_conflict
+from vibsynth.settings.models_studio import Studio
 from vibsynth.settings.values import (
     BINDABLE_CC_MAX,
     CC_MAX,
@@ -366,6 +367,7 @@ class VibsynthConfig(SettingsModel):
     speed: Speed = Field(default_factory=Speed, description="OSC /speed (mm/s) -> texture")
     presets: Presets = Field(default_factory=Presets, description="user presets and hot reload")
     clips: Clips = Field(default_factory=Clips, description="haptic clips: user folder, hot reload, AHAP/Meta mapping")
+    studio: Studio = Field(default_factory=Studio, description="the browser studio served by serve")
     layout: Annotated[
         Annotated[
             Annotated[str, Field(pattern=PROFILE_NAME), Tag("name")]

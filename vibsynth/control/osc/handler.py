@@ -17,16 +17,14 @@ The service calls :func:`add_arguments` and :func:`create` (adapter contract of
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import Any
 
-from vibsynth import __version__
 from vibsynth.control.controller import Controller, KnobEvent, check_finite, check_range
+from vibsynth.control.midi import learn_hook as _midi_learn_hook
 from vibsynth.control.osc.address import AddressSpace
 from vibsynth.control.osc.clock import StreamClock
 from vibsynth.control.osc.codec import (
@@ -49,6 +47,7 @@ from vibsynth.control.osc.replies import (
 )
 from vibsynth.control.osc.speed import SpeedCurve
 from vibsynth.control.osc.workers import Notifier, PeerLike, SyncWorker, setter_message
+from vibsynth.control.status import channel_status, engine_status, output_status
 from vibsynth.control.tap import InputTap
 from vibsynth.errors import ParameterError, PresetError, ScheduleFullError, VibsynthError
 
@@ -512,59 +511,20 @@ class OscHandler:
                 peer.send(setter_message(self.prefix, ch, name, vals[0]))
 
     def status_pairs(self) -> list[tuple[str, object]]:
-        """The ``/status.reply`` content as ``(key, value)`` pairs (-1 = not known)."""
-        engine = self.engine
+        """The ``/status.reply`` content as ``(key, value)`` pairs (-1 = not known); parts in control/status.py."""
         ctl = self.controller
-        pairs: list[tuple[str, object]] = [
-            ("version", __version__),
-            ("channels", int(ctl.channels)),
-            ("rate", float(getattr(engine, "fs", -1.0))),
-            (
-                "block_size",
-                int(_engine_stat(engine, ("block_size", "blocksize", "block_frames"), self.block_size or -1)),
-            ),
-            ("underflows", int(_engine_stat(engine, ("underflows", "xruns", "underruns"), -1))),
-            ("load", float(_engine_stat(engine, ("render_load", "load_avg", "load", "cpu_load"), -1.0))),
-            ("load_peak", float(_engine_stat(engine, ("load_peak",), -1.0))),
-            ("late_commands", int(_engine_stat(engine, ("late_commands",), -1))),
-            ("scheduled_pending", int(_engine_stat(engine, ("pending",), -1))),
-            ("schedule_full", int(_engine_stat(engine, ("schedule_full",), -1))),
-            ("uptime", float(time.monotonic() - ctl.started_at)),
-            ("frame", int(_engine_stat(engine, ("frame_position",), -1))),
+        pairs = engine_status(ctl, self.block_size) + [
             ("messages", self.stats.messages),
             ("scheduled", self.stats.scheduled),
             ("malformed", self.stats.malformed),
             ("errors", int(sum(ctl.error_counts.values()))),
             ("subscribers", len(self.notifier) if self.notifier is not None else 0),
         ]
-        # The audio output (set by the service as controller.output): "streaming", or
-        # "device lost" with the reason while it is retried.
-        output = getattr(ctl, "output", None)
-        if output is not None:
-            describe = getattr(output, "describe", None)
-            pairs += [
-                ("output", str(getattr(output, "state", ""))),
-                ("output_reason", str(getattr(output, "state_reason", ""))),
-                ("device", fit_osc_string(str(describe()) if callable(describe) else "", 400)),
-            ]
-        errors = self.tap.last_errors()
-        if errors:
-            pairs += [
-                ("last_error", fit_osc_string(errors[-1].text, 400)),
-                ("last_error_age", float(max(0.0, time.time() - errors[-1].time))),
-            ]
+        pairs += output_status(ctl, self.tap, fit_osc_string)
         if self.extra_status is not None:
             pairs.extend(self.extra_status())
         pairs += [("replies_truncated", self.stats.replies_truncated), ("replies_dropped", self.stats.replies_dropped)]
-        for ch, s in enumerate(ctl.state()):
-            pairs += [
-                (f"ch{ch + 1}.intensity", float(s.intensity)),
-                (f"ch{ch + 1}.balance", float(s.balance)),
-                (f"ch{ch + 1}.glide", float(s.glide_s * 1000.0)),
-                (f"ch{ch + 1}.mute", int(s.muted)),
-                (f"ch{ch + 1}.preset", s.preset or ""),
-            ]
-        return pairs
+        return pairs + channel_status(ctl)
 
     def _on_status(self, msg: Message, channels, peer, at_frame) -> None:
         args: list[object] = []
@@ -644,16 +604,6 @@ class OscHandler:
         self._reply(peer, f"{self.prefix}/done", (f"{self.prefix}/learn", name), "ss")
 
 
-def _midi_learn_hook() -> Callable[[str], bool] | None:
-    """``vibsynth.control.midi.adapter.learn`` when the MIDI adapter is installed, else None."""
-    try:
-        from vibsynth.control.midi import adapter as midi
-    except Exception:  # noqa: BLE001 - MIDI is optional (python-rtmidi may be missing)
-        return None
-    hook = getattr(midi, "learn", None)
-    return hook if callable(hook) else None
-
-
 def _sender(peer: PeerLike) -> str:
     address = getattr(peer, "address", None)
     if not address:
@@ -676,24 +626,3 @@ def describe_message(msg: Message, peer: PeerLike, at_frame: int | None = None) 
     args = " ".join(_show_arg(a) for a in msg.args[:16]) + (" …" if len(msg.args) > 16 else "")
     when = f" at frame {at_frame}" if at_frame is not None else ""
     return f"{msg.address} {msg.types} {args}".rstrip() + f"  ({_sender(peer)}{when})"
-
-
-def _engine_stat(engine: Any, names: Sequence[str], default: float) -> float:
-    """First available engine statistic among ``names`` (attributes or a ``stats`` mapping/method)."""
-    stats = getattr(engine, "stats", None)
-    try:
-        if callable(stats):
-            stats = stats()
-    except Exception:  # noqa: BLE001 - the engine is optional here, never let status fail
-        stats = None
-    for name in names:
-        value = None
-        if isinstance(stats, dict):
-            value = stats.get(name)
-        elif stats is not None:
-            value = getattr(stats, name, None)
-        if value is None:
-            value = getattr(engine, name, None)
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
-            return value
-    return default

@@ -1,0 +1,40 @@
+"""The studio's extension tabs: the parts of ``vibsynth/app`` that add a tab to the studio.
+
+Each module named in :data:`STUDIO_EXTENSION_MODULES` defines
+``studio_extension(config, controller, library) -> StudioExtension | None`` (None: nothing to
+add, e.g. disabled by the config). The lab (issue 17) and the clip lane (issue 16) add
+their module here, one line each; docs/studio.md, "Extensions", describes the contract.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from typing import Any
+
+from vibsynth.control.studio.extension import StudioExtension
+
+__all__ = ["STUDIO_EXTENSION_MODULES", "studio_extensions"]
+
+log = logging.getLogger(__name__)
+
+#: Modules providing ``studio_extension(config, controller, library)``, in tab order.
+STUDIO_EXTENSION_MODULES: tuple[str, ...] = ()
+
+
+def studio_extensions(
+    config: Any, controller: Any, library: Any, modules: tuple[str, ...] | None = None
+) -> list[StudioExtension]:
+    """The extensions the studio shows (modules missing from this installation are skipped)."""
+    out = []
+    for name in STUDIO_EXTENSION_MODULES if modules is None else modules:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:
+                raise
+            continue
+        extension = module.studio_extension(config, controller, library)
+        if extension is not None:
+            out.append(extension)
+    return out

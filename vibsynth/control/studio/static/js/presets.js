@@ -1,0 +1,2 @@
+// Presets panel.
+export function mountPresets(studio) {}

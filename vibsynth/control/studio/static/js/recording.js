@@ -1,0 +1,2 @@
+// Recording panel.
+export function mountRecording(studio) {}
