@@ -1655,16 +1655,17 @@ namespace Vibsynth
 
         Task<T> Get<T>(int channel, string what, Func<OscMessage, bool> shape, Func<OscMessage, T> convert, TimeSpan? timeout)
         {
-            string base_ = ChannelAddress(channel, "");
-            string want = base_ + what;
-            string address = base_ + "get";
-            return Request(address, Osc.EncodeMessage(address, "s", new object[] { what }),
-                reply => reply.Address == want && Shaped(reply, shape), convert, timeout);
+            return Query(ChannelAddress(channel, ""), what, shape, convert, timeout);
         }
 
         Task<T> GetSource<T>(int source, string what, Func<OscMessage, bool> shape, Func<OscMessage, T> convert, TimeSpan? timeout)
         {
-            string base_ = SourceAddress(source, "");
+            return Query(SourceAddress(source, ""), what, shape, convert, timeout);
+        }
+
+        // `{base}get s what`, answered in setter form at `{base}{what}` (base ends in '/')
+        Task<T> Query<T>(string base_, string what, Func<OscMessage, bool> shape, Func<OscMessage, T> convert, TimeSpan? timeout)
+        {
             string want = base_ + what;
             string address = base_ + "get";
             return Request(address, Osc.EncodeMessage(address, "s", new object[] { what }),

@@ -19,6 +19,7 @@ CLIENT = ROOT / "clients" / "csharp" / "VibsynthClient.cs"
 UNITY_EXAMPLE = ROOT / "clients" / "csharp" / "Unity" / "VibsynthContactSource.cs"
 HERE = Path(__file__).resolve().parent / "csharp"
 CHECK = HERE / "ClientCheck.cs"
+CHECK_MAIN = HERE / "CheckMain.cs"
 UNITY_SHIM = HERE / "UnityEngineShim.cs"
 UNITY_CHECK = HERE / "UnityCheck.cs"
 
@@ -74,4 +75,4 @@ def run_mono(exe: Path, *args: object, timeout: float = 120.0, check: bool = Tru
 def build_client_check(folder: Path) -> Path:
     """``ClientCheck.exe`` (the client and the test program) compiled into ``folder``; skips without mono."""
     require_mono()
-    return compile_cs(folder / "ClientCheck.exe", CLIENT, CHECK)
+    return compile_cs(folder / "ClientCheck.exe", CLIENT, CHECK, CHECK_MAIN)

@@ -12,13 +12,22 @@ from pathlib import Path
 
 import pytest
 
-from tests.clients.mono import CLIENT, UNITY_CHECK, UNITY_EXAMPLE, UNITY_SHIM, compile_cs, require_mono, run_mono
+from tests.clients.mono import (
+    CHECK_MAIN,
+    CLIENT,
+    UNITY_CHECK,
+    UNITY_EXAMPLE,
+    UNITY_SHIM,
+    compile_cs,
+    require_mono,
+    run_mono,
+)
 
 
 def build_unity_check(folder: Path) -> Path:
     """The client, the example, the shim and UnityCheck.cs compiled into ``folder``; skips without mono."""
     require_mono()
-    return compile_cs(folder / "UnityCheck.exe", CLIENT, UNITY_EXAMPLE, UNITY_SHIM, UNITY_CHECK)
+    return compile_cs(folder / "UnityCheck.exe", CLIENT, UNITY_EXAMPLE, UNITY_SHIM, UNITY_CHECK, CHECK_MAIN)
 
 
 @pytest.fixture(scope="module")
@@ -73,9 +82,9 @@ def test_a_contact_becomes_a_source_that_follows_it_and_turns_off(unity_check):
     assert [float(v) for v in seen["position"].split(",")] == pytest.approx([0.025, 0.0, 0.02], abs=1e-6)
     # a second collider moves the source to it; the source stays on until the last contact ends
     assert _message(packets[6]) == ("/vibsynth/source/3/pos", "fff", pytest.approx([0.05, 0.0, 0.05], abs=1e-6))
-    assert seen["touching.after_one_exit"] == "True"
+    assert seen["touching.after_one_exit"] == "true"
     assert packets[7] == "/vibsynth/source/3/on i 0"
-    assert seen["touching.after_both"] == "False" and float(seen["speed_after"]) == 0.0
+    assert seen["touching.after_both"] == "false" and float(seen["speed_after"]) == 0.0
     assert len(packets) == 8  # nothing else: no message per physics step beyond the rate
     assert seen["client_after_disable"] == "null"
     assert seen["warnings"] == "0"

@@ -13,53 +13,26 @@ using Vibsynth;
 
 static class ClientCheck
 {
-    static readonly CultureInfo Inv = CultureInfo.InvariantCulture;
+    static readonly CultureInfo Inv = CheckMain.Inv;
 
     static int Main(string[] args)
     {
-        Thread.CurrentThread.CurrentCulture = new CultureInfo("de-DE"); // decimal commas must not leak onto the wire
-        if (args.Length == 0)
+        return CheckMain.Run(args, new Dictionary<string, Action<string[]>>
         {
-            Console.Error.WriteLine("usage: ClientCheck.exe encode|decode|args|knobs|errors|timeout|bundle|concurrent|sources|clips ...");
-            return 2;
-        }
-        try
-        {
-            switch (args[0])
-            {
-                case "encode": Encode(); break;
-                case "decode": Decode(args); break;
-                case "args": Arguments(int.Parse(args[1], Inv)); break;
-                case "knobs": Knobs(int.Parse(args[1], Inv)); break;
-                case "errors": Errors(int.Parse(args[1], Inv)); break;
-                case "timeout": Timeout(int.Parse(args[1], Inv)); break;
-                case "bundle": Bundles(int.Parse(args[1], Inv)); break;
-                case "concurrent": Concurrent(int.Parse(args[1], Inv)); break;
-                case "sources": Sources(int.Parse(args[1], Inv)); break;
-                case "clips": Clips(int.Parse(args[1], Inv), args[2]); break;
-                default:
-                    Console.Error.WriteLine("unknown command " + args[0]);
-                    return 2;
-            }
-        }
-        catch (Exception e)
-        {
-            Console.Error.WriteLine("FAILED: " + e);
-            return 1;
-        }
-        return 0;
+            { "encode", a => Encode() },
+            { "decode", Decode },
+            { "args", a => Arguments(CheckMain.Int(a[0])) },
+            { "knobs", a => Knobs(CheckMain.Int(a[0])) },
+            { "errors", a => Errors(CheckMain.Int(a[0])) },
+            { "timeout", a => Timeout(CheckMain.Int(a[0])) },
+            { "bundle", a => Bundles(CheckMain.Int(a[0])) },
+            { "concurrent", a => Concurrent(CheckMain.Int(a[0])) },
+            { "sources", a => Sources(CheckMain.Int(a[0])) },
+            { "clips", a => Clips(CheckMain.Int(a[0]), a[1]) },
+        });
     }
 
-    static void Say(string key, object value)
-    {
-        string text;
-        if (value is float) text = ((float)value).ToString("R", Inv);
-        else if (value is double) text = ((double)value).ToString("R", Inv);
-        else if (value is bool) text = (bool)value ? "true" : "false";
-        else if (value == null) text = "null";
-        else text = Convert.ToString(value, Inv);
-        Console.WriteLine(key + "=" + text.Replace("\n", "\\n"));
-    }
+    static void Say(string key, object value) { CheckMain.Say(key, value); }
 
     static string Hex(byte[] data)
     {
@@ -128,17 +101,13 @@ static class ClientCheck
     // with every value in an unambiguous form (numbers in decimal, float bits and text in hex).
     static void Decode(string[] args)
     {
-        for (int i = 1; i < args.Length; i++)
+        for (int i = 0; i < args.Length; i++)
         {
             List<OscReceived> messages = Osc.Decode(Unhex(args[i]));
-            if (messages == null)
-            {
-                Say("packet" + i, "null");
-                continue;
-            }
             var parts = new List<string>();
-            foreach (OscReceived m in messages) parts.Add(Canonical(m));
-            Say("packet" + i, string.Join(" | ", parts.ToArray()));
+            if (messages != null)
+                foreach (OscReceived m in messages) parts.Add(Canonical(m));
+            Say("packet" + (i + 1), messages == null ? "null" : string.Join(" | ", parts.ToArray()));
         }
     }
 

@@ -15,32 +15,18 @@ using Vibsynth;
 
 static class UnityCheck
 {
-    static readonly CultureInfo Inv = CultureInfo.InvariantCulture;
+    static readonly CultureInfo Inv = CheckMain.Inv;
 
     static int Main(string[] args)
     {
-        try
+        return CheckMain.Run(args, new Dictionary<string, Action<string[]>>
         {
-            if (args.Length == 1 && args[0] == "listen") Listen();
-            else if (args.Length == 2 && args[0] == "server") Server(int.Parse(args[1], Inv));
-            else
-            {
-                Console.Error.WriteLine("usage: UnityCheck.exe listen | server PORT");
-                return 2;
-            }
-        }
-        catch (Exception e)
-        {
-            Console.Error.WriteLine("FAILED: " + e);
-            return 1;
-        }
-        return 0;
+            { "listen", a => Listen() },
+            { "server", a => Server(CheckMain.Int(a[0])) },
+        });
     }
 
-    static void Say(string key, object value)
-    {
-        Console.WriteLine(key + "=" + Convert.ToString(value, Inv));
-    }
+    static void Say(string key, object value) { CheckMain.Say(key, value); }
 
     // Unity calls these private messages by name; so does this program.
     static void Call(VibsynthContactSource component, string message, params object[] args)
