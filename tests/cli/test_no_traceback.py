@@ -43,6 +43,15 @@ def files(tmp_path_factory, basis):
     (d / "junk.vbt").write_bytes(b"VBTR" + bytes(60))
     (d / "junk.mid").write_bytes(b"MThd" + bytes(20))
     (d / "user.yaml").write_text("version: 1\n")
+    (d / "truncated.ahap").write_text('{"Version": 1, "Pattern": [{"Event": {"Time": 0.0, "EventType": "Hap')
+    (d / "nan.ahap").write_text('{"Pattern": [{"Event": {"Time": NaN, "EventType": "HapticTransient"}}]}')
+    (d / "huge.ahap").write_text(
+        '{"Pattern": [' + '{"Event": {"Time": 0, "EventType": "HapticTransient"}},' * 120_000 + "]}"
+    )
+    (d / "bad.haptic").write_text(
+        '{"version": {"major": 1}, "signals": {"continuous": {"envelopes": {"amplitude": []}}}}'
+    )
+    (d / "bad-clip.yaml").write_text("duration_ms: 100\nkeyframes: [{t_ms: 0, intensity: 2, balance: 0}]\n")
     return d
 
 
@@ -81,6 +90,13 @@ def _cases():
         ("dissim fit {dir}/ratings.csv --splits 0", USAGE),
         ("preset show", USAGE),
         ("config show no.such.key", USAGE),
+        ("clip show", USAGE),
+        ("clip show nosuchclip", USAGE),
+        ("clip import {dir}/good.wav", USAGE),
+        ("clip import {dir}/nan.ahap --name ../x", USAGE),
+        ("clip import {dir}/nan.ahap --from wav", USAGE),
+        ("clip export nosuchclip -o {dir}/o.ahap", USAGE),
+        ("clip export heartbeat --format wav", USAGE),
         # a file is missing, unreadable or malformed, or cannot be written
         ("analyze {dir}/missing.wav", RUNTIME),
         ("analyze {dir}/junk.wav", RUNTIME),
@@ -105,6 +121,16 @@ def _cases():
         ("preset from-recording {dir}/junk.wav --name x", RUNTIME),
         ("serve --config {dir}/bomb.yaml --seconds 0.1", RUNTIME),
         ("serve --output wav -o {dir}/missing-dir/x.wav --seconds 0.1", RUNTIME),
+        ("clip import {dir}/truncated.ahap", RUNTIME),
+        ("clip import {dir}/nan.ahap", RUNTIME),
+        ("clip import {dir}/huge.ahap", RUNTIME),
+        ("clip import {dir}/missing.ahap", RUNTIME),
+        ("clip import {dir}/bad.haptic", RUNTIME),
+        ("clip import {dir}/junk.wav --from haptic", RUNTIME),
+        ("clip validate {dir}/bad-clip.yaml", RUNTIME),
+        ("clip validate {dir}/bomb.yaml", RUNTIME),
+        ("clip validate {dir}/binary.yaml", RUNTIME),
+        ("clip export heartbeat -o {dir}/good.wav/x.ahap", RUNTIME),
     ]
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -11,6 +12,7 @@ from pathlib import Path
 from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
 from vibsynth.formats.basis_file import default_basis, load_basis
+from vibsynth.settings.models_preset import NAME_PATTERN, NAME_RULE
 
 __all__ = [
     "finite_float",
@@ -19,6 +21,7 @@ __all__ = [
     "unit_interval",
     "positive_seconds",
     "sample_rate",
+    "file_name_argument",
     "add_basis_argument",
     "basis_from_args",
     "Progress",
@@ -78,6 +81,17 @@ unit_interval.__doc__ = "A number in [0, 1] (the intensity knob)."
 positive_seconds = number_in(0.0, MAX_SECONDS, unit="s", low_open=True)
 #: A sample rate in Hz within [2400, 768000] (the bank reaches 1000 Hz).
 sample_rate = number_in(MIN_RATE_HZ, MAX_RATE_HZ, unit="Hz")
+
+
+def file_name_argument(noun: str) -> Callable[[str], str]:
+    """An argparse type: the name of a preset, clip... (it becomes a file name: no folders, no dot first)."""
+
+    def parse(text: str) -> str:
+        if not re.fullmatch(NAME_PATTERN, text):
+            raise argparse.ArgumentTypeError(f"{noun} name {text!r}: must be {NAME_RULE}")
+        return text
+
+    return parse
 
 
 def add_basis_argument(parser: argparse.ArgumentParser) -> None:

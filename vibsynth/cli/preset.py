@@ -12,12 +12,12 @@ import hashlib
 import json
 import logging
 import math
-import re
 import sys
 from pathlib import Path
 from typing import Any
 
 from vibsynth import __version__
+from vibsynth.cli._common import file_name_argument
 from vibsynth.cli._inputs import wav_channel
 from vibsynth.cli._table import Column, add_format_argument, emit, output_format
 from vibsynth.errors import ParameterError, PresetError
@@ -25,7 +25,6 @@ from vibsynth.settings.cli_args import flag_type
 from vibsynth.settings.config import Config, add_config_arguments, config_from_args
 from vibsynth.settings.library import PresetLibrary, UnknownPresetError, load_library
 from vibsynth.settings.models import PresetModel
-from vibsynth.settings.models_preset import NAME_PATTERN, NAME_RULE
 from vibsynth.settings.presets import BALANCE_LIMIT, Preset, preset_to_yaml
 
 __all__ = ["ORDER", "register"]
@@ -87,11 +86,8 @@ def _write_new(library: PresetLibrary, preset: Preset, output: Path | None, forc
     return library.save_user(preset, overwrite=force)
 
 
-def preset_name(text: str) -> str:
-    """An argparse type: a preset name (it becomes a file name, so no folders, no dots first)."""
-    if not re.fullmatch(NAME_PATTERN, text):
-        raise argparse.ArgumentTypeError(f"preset name {text!r}: must be {NAME_RULE}")
-    return text
+#: An argparse type: a preset name (it becomes a file name, so no folders, no dots first).
+preset_name = file_name_argument("preset")
 
 
 def _typed_preset(**fields: Any) -> Preset:

@@ -1,0 +1,184 @@
+"""``vibsynth clip list|show|validate|import|export``: content of every output, and failures that change nothing."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from vibsynth.cli import main
+from vibsynth.formats.ahap import read_ahap
+from vibsynth.settings.clips import load_clip
+from vibsynth.settings.config import ENV_VARS
+
+BOING = {
+    "Version": 1.0,
+    "Metadata": {"Description": "a spring"},
+    "Pattern": [
+        {
+            "Event": {
+                "Time": 0.0,
+                "EventType": "HapticTransient",
+                "EventParameters": [
+                    {"ParameterID": "HapticIntensity", "ParameterValue": 0.8},
+                    {"ParameterID": "HapticSharpness", "ParameterValue": 0.4},
+                ],
+            }
+        },
+        {
+            "Event": {
+                "Time": 0.015,
+                "EventType": "HapticContinuous",
+                "EventDuration": 0.25,
+                "EventParameters": [
+                    {"ParameterID": "HapticIntensity", "ParameterValue": 0.8},
+                    {"ParameterID": "HapticSharpness", "ParameterValue": 0.75},
+                ],
+            }
+        },
+        {
+            "ParameterCurve": {
+                "ParameterID": "HapticIntensityControl",
+                "Time": 0.015,
+                "ParameterCurveControlPoints": [
+                    {"Time": 0, "ParameterValue": 1},
+                    {"Time": 0.25, "ParameterValue": 0.0},
+                ],
+            }
+        },
+        {"Event": {"Time": 0.3, "EventType": "AudioCustom", "EventWaveformPath": "boing.wav"}},
+    ],
+}
+
+
+@pytest.fixture(autouse=True)
+def isolated(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "cfg"))
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    for var in list(ENV_VARS) + ["VIBSYNTH_CONFIG"]:
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.chdir(tmp_path)
+    return tmp_path / "data" / "vibsynth" / "clips"
+
+
+def run(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_list_table_csv_and_json(capsys):
+    code, out, _ = run(capsys, "clip", "list")
+    lines = out.splitlines()
+    assert code == 0 and lines[0].split() == ["name", "ms", "keyframes", "transients", "loop", "from", "tags"]
+    heart = next(line for line in lines if line.startswith("heartbeat"))
+    assert heart.split()[:6] == ["heartbeat", "1000", "7", "2", "0-1000", "shipped"]
+    assert "impact" in out and "5 clips; user folder:" in out
+    code, out, _ = run(capsys, "clip", "list", "--json", "--tag", "loop")
+    data = json.loads(out)
+    assert sorted(d["name"] for d in data) == ["gravel-steps", "heartbeat", "rain", "zipper"]
+    assert data[0]["keyframes"][0].keys() >= {"t_ms", "intensity", "balance"} and data[0]["origin"] == "shipped"
+    code, out, _ = run(capsys, "clip", "list", "--format", "csv")
+    assert out.splitlines()[0] == "name,duration_ms,keyframes,transients,loop,origin,tags"
+    assert "zipper,720.0,6,19,100-600,shipped,zipper;mechanical;loop" in out
+
+
+def test_show_prints_the_yaml_and_where_it_is(capsys):
+    code, out, _ = run(capsys, "clip", "show", "impact")
+    assert code == 0 and out.startswith("# shipped clip: ") and "(320 ms, 3 keyframes, 1 transients)" in out
+    assert "name: impact" in out and "- {t_ms: 0, intensity: 1, balance: 2.2, decay_ms: 45}" in out
+    code, out, _ = run(capsys, "clip", "show", "impact", "--json")
+    assert json.loads(out)["duration_ms"] == 320
+    code, _, err = run(capsys, "clip", "show", "impakt")
+    assert code == 2 and "unknown clip 'impakt'; did you mean impact?" in err
+
+
+def test_validate_names_the_line(tmp_path, capsys):
+    good, bad = tmp_path / "good.yaml", tmp_path / "bad.yaml"
+    good.write_text("duration_ms: 100\nkeyframes: [{t_ms: 0, intensity: 0.5, balance: 0}]\n")
+    bad.write_text(
+        "duration_ms: 100\nkeyframes:\n"
+        "  - {t_ms: 0, intensity: 0.5, balance: 0}\n"
+        "  - {t_ms: 0, intensity: 1, balance: 0}\n"
+    )
+    code, out, err = run(capsys, "clip", "validate", str(good), str(bad))
+    assert code == 1 and f"{good}: OK (good: 100 ms, 1 keyframes, 0 transients)" in out
+    assert f"{bad}:4: keyframes[1].t_ms = 0: keyframe times must strictly increase" in err
+    assert "1 of 2 clip files are invalid" in err
+
+
+def test_import_ahap_into_the_user_folder_then_export_it_back(tmp_path, capsys, isolated):
+    src = tmp_path / "Boing Spring.ahap"
+    src.write_text(json.dumps(BOING))
+    code, out, err = run(capsys, "clip", "import", str(src))
+    assert code == 0 and out.startswith(f"wrote {isolated / 'Boing-Spring.yaml'}: 265 ms")
+    assert "vibsynth: warning:" in err and "AudioCustom events (audio is not played)" in err
+    clip = load_clip(isolated / "Boing-Spring.yaml")
+    assert clip.description == "a spring" and clip.transients[0].balance == pytest.approx(-0.7)
+    assert clip.value_at(15) == pytest.approx((0.8, 1.75))  # sharpness 0.75 -> balance 1.75 (default mapping)
+    code, out, _ = run(capsys, "clip", "list")
+    assert "Boing-Spring" in out and "user" in out
+
+    code, out, err = run(capsys, "clip", "export", "Boing-Spring", "--format", "ahap")
+    assert code == 0 and out.startswith("wrote Boing-Spring.ahap") and "decay_ms is not exported" in err
+    design = read_ahap(tmp_path / "Boing-Spring.ahap")
+    assert design.taps[0].intensity == pytest.approx(0.8) and design.value_at(0.14)[0] == pytest.approx(0.4, abs=0.01)
+    code, _, err = run(capsys, "clip", "export", "Boing-Spring")
+    assert code == 1 and "exists already (use --force" in err
+    code, out, _ = run(capsys, "clip", "export", "heartbeat", "-o", "-")
+    assert json.loads(out)["Pattern"][0]["Event"]["EventType"] in ("HapticContinuous", "HapticTransient")
+
+
+def test_import_with_name_output_and_mapping_from_the_config(tmp_path, capsys):
+    src = tmp_path / "hit.haptic"
+    src.write_text(
+        json.dumps(
+            {
+                "version": {"major": 1},
+                "signals": {
+                    "continuous": {
+                        "envelopes": {
+                            "amplitude": [{"time": 0, "amplitude": 0.5}, {"time": 0.2, "amplitude": 0.5}],
+                            "frequency": [{"time": 0, "frequency": 1.0}],
+                        }
+                    }
+                },
+            }
+        )
+    )
+    code, out, _ = run(
+        capsys,
+        "clip",
+        "import",
+        str(src),
+        "--name",
+        "hit2",
+        "-o",
+        str(tmp_path),
+        "--set",
+        "clips.sharpness_1_balance=1.5",
+        "--set",
+        "clips.intensity_exponent=2",
+    )
+    assert code == 0 and out.startswith(f"wrote {tmp_path / 'hit2.yaml'}")
+    clip = load_clip(tmp_path / "hit2.yaml")
+    assert clip.value_at(100) == pytest.approx((0.25, 1.5))
+
+
+def test_a_failed_import_writes_nothing(tmp_path, capsys, isolated):
+    bad = tmp_path / "nan.ahap"
+    bad.write_text('{"Pattern": [{"Event": {"Time": NaN, "EventType": "HapticTransient"}}]}')
+    code, _, err = run(capsys, "clip", "import", str(bad))
+    assert code == 1 and err.startswith(f"vibsynth: error: {bad}: NaN is not a number") and err.count("\n") == 1
+    assert not isolated.exists() or not any(isolated.iterdir())
+    (tmp_path / "keep.ahap").write_text(json.dumps(BOING))
+    assert run(capsys, "clip", "import", str(tmp_path / "keep.ahap"))[0] == 0
+    before = (isolated / "keep.yaml").read_bytes()
+    code, _, err = run(capsys, "clip", "import", str(tmp_path / "keep.ahap"))
+    assert code == 1 and "exists already" in err and (isolated / "keep.yaml").read_bytes() == before
+
+
+def test_schema_is_the_clip_schema(capsys):
+    code, out, _ = run(capsys, "clip", "schema")
+    schema = json.loads(out)
+    assert code == 0 and schema["title"] == "vibsynth haptic clip" and "keyframes" in schema["required"]
