@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared"
+#: ../shared beside the repository; from a worktree in a folder of worktrees (/work/wt/<name>), ../../shared
+SHARED = next((p / "shared" for p in (ROOT.parent, ROOT.parent.parent) if (p / "shared").is_dir()), ROOT.parent / "shared")
 HATT_PSD = SHARED / "datasets" / "hatt-psd" / "psd.csv.gz"
 
 

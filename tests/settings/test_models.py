@@ -189,6 +189,7 @@ TIED = {
     "clips.sharpness_half_balance",
     "clips.sharpness_1_balance",
 }
+TIED |= {"lab.gain_min", "lab.gain_max"}  # gain_min < gain_max
 
 
 @pytest.mark.parametrize("seed", range(5))

@@ -15,6 +15,7 @@ from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, Val
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
 from vibsynth.settings.models_sources import Sources, knob_conflict
+from vibsynth.settings.models_lab import Lab
 from vibsynth.settings.models_studio import Studio
 from vibsynth.settings.values import (
     BINDABLE_CC_MAX,
@@ -385,6 +386,7 @@ class VibsynthConfig(SettingsModel):
         schema={"propertyNames": {"pattern": "^[1-9][0-9]*$"}},
     )
     sources: Sources = Field(default_factory=Sources, description="touch sources mixed onto the layout (docs/vr.md)")
+    lab: Lab = Field(default_factory=Lab, description="the perception lab: sessions folder, the protocols' defaults")
 
     @model_validator(mode="after")
     def _cross_check(self, info: ValidationInfo) -> VibsynthConfig:
