@@ -9,7 +9,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 #: ../shared beside the repository; from a worktree in a folder of worktrees (/work/wt/<name>), ../../shared
-SHARED = next((p / "shared" for p in (ROOT.parent, ROOT.parent.parent) if (p / "shared").is_dir()), ROOT.parent / "shared")
+SHARED = next(
+    (p / "shared" for p in (ROOT.parent, ROOT.parent.parent) if (p / "shared").is_dir()), ROOT.parent / "shared"
+)
 HATT_PSD = SHARED / "datasets" / "hatt-psd" / "psd.csv.gz"
 
 

@@ -97,6 +97,11 @@ def _cases():
         ("clip import {dir}/nan.ahap --from wav", USAGE),
         ("clip export nosuchclip -o {dir}/o.ahap", USAGE),
         ("clip export heartbeat --format wav", USAGE),
+        ("lab plan dissimilarity --stimuli renders:1", USAGE),
+        ("lab plan dissimilarity --stimuli renders --seed -1", USAGE),
+        ("lab plan dissimilarity --stimuli renders --seed 18446744073709551616", USAGE),
+        ("lab plan abx --stimuli renders", USAGE),
+        ("lab sessions --format xml", USAGE),
         # a file is missing, unreadable or malformed, or cannot be written
         ("analyze {dir}/missing.wav", RUNTIME),
         ("analyze {dir}/junk.wav", RUNTIME),
@@ -131,6 +136,12 @@ def _cases():
         ("clip validate {dir}/bomb.yaml", RUNTIME),
         ("clip validate {dir}/binary.yaml", RUNTIME),
         ("clip export heartbeat -o {dir}/good.wav/x.ahap", RUNTIME),
+        ("lab plan dissimilarity --stimuli {dir}/folder", RUNTIME),  # no WAVs
+        ("lab plan dissimilarity --stimuli {dir}", RUNTIME),  # broken WAVs
+        ("lab plan dissimilarity --stimuli presets:nope", RUNTIME),
+        ("lab analyze {dir}/folder", RUNTIME),  # not a session
+        ("lab analyze ../escape", RUNTIME),
+        ("lab equalise {dir}/folder -o {dir}/eq", RUNTIME),
     ]
 
 

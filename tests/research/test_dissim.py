@@ -141,3 +141,17 @@ def test_mds_map_first_axis_follows_t1(rng, tmp_path):
     assert m.component_r[0, 0] > 0.9  # the paper: r = 0.94 between V1 and MDS dimension 1
     fit = fit_from_ratings(table, scores[order], n_splits=3, seed=0, cv=5, components=False)
     assert fit.weights[0] > 0
+
+
+def test_a_component_that_only_holds_rounding_noise_gets_no_weight(rng):
+    """Stimuli made as M + t1 V1 have T2..T8 equal up to rounding; noise must not take a (huge) weight."""
+    t1 = rng.uniform(-30, 30, 8)
+    scores = np.zeros((8, 8))
+    scores[:, 0] = t1
+    scores[:, 1:] = rng.standard_normal((8, 7)) * 1e-9
+    pairs = np.array([(i, j) for i in range(8) for j in range(i, 8)])
+    d = np.abs(scores[pairs[:, 0]] - scores[pairs[:, 1]])
+    ratings = d[:, 0] / 60.0 + rng.normal(0, 0.01, len(pairs))
+    fit = fit_dissimilarity_weights(d, ratings, n_splits=5, cv=5, seed=1)
+    assert fit.weights[0] == pytest.approx(1 / 60, rel=0.2)
+    assert np.all(fit.weights[1:] == 0.0)

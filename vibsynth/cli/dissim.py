@@ -5,9 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vibsynth.cli._common import Progress, add_basis_argument, basis_from_args, integer_in, sample_rate
 from vibsynth.cli._table import Column, add_format_argument, emit, output_format
+
+if TYPE_CHECKING:
+    from vibsynth.research.dissim import DissimilarityFit
 
 ORDER = 52
 
@@ -62,21 +66,8 @@ def run_fit(args: argparse.Namespace) -> int:
         solver=args.solver,
     )
     fmt = output_format(args)
-    k = fit.weights.size
     if fmt == "csv":
-        rows = [
-            {
-                "component": f"T{j + 1}",
-                "weight": float(fit.weights[j]),
-                "weight_mean": float(fit.weights_mean[j]),
-                "weight_sd": float(fit.weights_sd[j]),
-                "selected_fraction": float(fit.selected_fraction[j]),
-                "r2_alone": float(fit.r2_single_mean[j]),
-                "r2_first_i": float(fit.r2_first_mean[j]),
-            }
-            for j in range(k)
-        ]
-        emit(rows, [Column(key, key) for key in rows[0]], "csv")
+        emit_weights_csv(fit)
         return 0
     if fmt == "json":
         out = fit.to_dict()
@@ -91,16 +82,45 @@ def run_fit(args: argparse.Namespace) -> int:
         print(json.dumps(out, indent=2))
         return 0
     print(
-        f"{table.n_rows} ratings -> {fit.n_pairs} pairs of {len(table.files)} recordings "
-        f"(basis {basis.id}); {fit.n_splits} splits of {fit.n_train} train / {fit.n_test} test, "
+        f"{table.n_rows} ratings -> {fit.n_pairs} pairs of {len(table.files)} recordings (basis {basis.id}); ", end=""
+    )
+    print_fit(fit)
+    return 0
+
+
+def weight_rows(fit: DissimilarityFit) -> list[dict[str, float | str]]:
+    """One row per score component: its weights, how often it was selected, its R^2 alone and with the first i."""
+    return [
+        {
+            "component": f"T{j + 1}",
+            "weight": float(fit.weights[j]),
+            "weight_mean": float(fit.weights_mean[j]),
+            "weight_sd": float(fit.weights_sd[j]),
+            "selected_fraction": float(fit.selected_fraction[j]),
+            "r2_alone": float(fit.r2_single_mean[j]),
+            "r2_first_i": float(fit.r2_first_mean[j]),
+        }
+        for j in range(fit.weights.size)
+    ]
+
+
+def emit_weights_csv(fit: DissimilarityFit) -> None:
+    """The weights as CSV on stdout (``dissim fit --format csv``, ``lab analyze --format csv``)."""
+    rows = weight_rows(fit)
+    emit(rows, [Column(key, key) for key in rows[0]], "csv")
+
+
+def print_fit(fit: DissimilarityFit) -> None:
+    """The fit for people: splits, held-out R^2 beside the paper's, the weights and Fig. 6b's numbers."""
+    print(
+        f"{fit.n_splits} splits of {fit.n_train} train / {fit.n_test} test, "
         f"{fit.cv}-fold CV, {'non-negative ' if fit.positive else ''}Lasso ({fit.solver})"
     )
     print(f"test R^2 = {fit.r2_mean:.3f} (SD {fit.r2_sd:.3f})      [paper: 0.54, SD 0.11]")
     print(f"intercept (identical pair) = {fit.intercept:.4f}; penalty alpha = {fit.alpha:.3g}")
     print("component   weight (all pairs)   mean +- SD over splits   selected   R^2 alone   R^2 first i")
-    for j in range(k):
+    for j in range(fit.weights.size):
         print(
             f"  T{j + 1:<8} {fit.weights[j]:>14.5f}   {fit.weights_mean[j]:>10.5f} +- {fit.weights_sd[j]:<9.5f}"
             f" {100 * fit.selected_fraction[j]:>7.0f} %   {fit.r2_single_mean[j]:>9.3f}   {fit.r2_first_mean[j]:>10.3f}"
         )
-    return 0

@@ -351,6 +351,8 @@ class DissimilarityFit:
 
 
 SOLVERS = ("lars", "cd")
+#: Relative spread under which a distance feature is rounding noise (see :func:`_fit_scaled`).
+NEGLIGIBLE_SPREAD = 1e-6
 
 
 def _lasso(x: NDArray[np.float64], y: NDArray[np.float64], *, cv: int, seed: int, positive: bool, solver: str) -> Any:
@@ -375,11 +377,20 @@ def _lasso(x: NDArray[np.float64], y: NDArray[np.float64], *, cv: int, seed: int
 def _fit_scaled(
     x: NDArray[np.float64], y: NDArray[np.float64], *, cv: int, seed: int, positive: bool, solver: str
 ) -> tuple[NDArray[np.float64], float, float]:
-    """Lasso on standardised features; weights mapped back to raw units."""
+    """Lasso on standardised features; weights mapped back to raw units.
+
+    A feature whose spread is rounding noise next to the others' (below :data:`NEGLIGIBLE_SPREAD`
+    of the largest: e.g. T2..T8 of stimuli synthesised as ``M + t1 V1``) gets weight 0: scaled up
+    to unit variance, noise would take any weight, and mapped back it would be huge.
+    """
     scale = x.std(axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
-    model = _lasso(x / scale, y, cv=cv, seed=seed, positive=positive, solver=solver)
-    return np.asarray(model.coef_) / scale, float(model.intercept_), float(model.alpha_)
+    keep = scale > NEGLIGIBLE_SPREAD * max(float(scale.max()), 0.0)
+    weights = np.zeros(x.shape[1])
+    if not keep.any():
+        return weights, float(y.mean()), math.nan
+    model = _lasso(x[:, keep] / scale[keep], y, cv=cv, seed=seed, positive=positive, solver=solver)
+    weights[keep] = np.asarray(model.coef_) / scale[keep]
+    return weights, float(model.intercept_), float(model.alpha_)
 
 
 def _r2(y: NDArray[np.float64], pred: NDArray[np.float64]) -> float:

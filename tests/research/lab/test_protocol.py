@@ -22,7 +22,9 @@ def test_participant_ids_with_path_characters_are_refused(bad):
         check_participant(bad)
 
 
-@pytest.mark.parametrize("value, expected", [(0, 0), ("42", 42), (" 7 ", 7), (MAX_SEED, MAX_SEED), (str(MAX_SEED), MAX_SEED)])
+@pytest.mark.parametrize(
+    "value, expected", [(0, 0), ("42", 42), (" 7 ", 7), (MAX_SEED, MAX_SEED), (str(MAX_SEED), MAX_SEED)]
+)
 def test_seeds_from_numbers_and_text(value, expected):
     assert check_seed(value) == expected
 

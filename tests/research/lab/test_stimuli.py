@@ -8,6 +8,7 @@ import os
 import numpy as np
 import pytest
 
+from tests.research.lab.conftest import HATT_TEXTURES, RATE
 from vibsynth.errors import InputError, ParameterError
 from vibsynth.formats.recordings import write_wav
 from vibsynth.research.lab.stimuli import (
@@ -23,7 +24,6 @@ from vibsynth.research.lab.stimuli import (
     resynthesis_versions,
     stimulus_id,
 )
-from tests.research.lab.conftest import HATT_TEXTURES, RATE
 
 
 @pytest.mark.shared
@@ -129,7 +129,12 @@ def test_specs():
     assert parse_set_spec("renders:6").count == 6
     assert parse_set_spec("~/stimuli").folder == os.path.expanduser("~/stimuli") or True
     assert parse_set_spec("/data/x").text == "/data/x"
-    for bad, message in [("", "give 'presets'"), ("renders:1", "2..60"), ("renders:x", "2..60"), ("presets:,", "name at least")]:
+    for bad, message in [
+        ("", "give 'presets'"),
+        ("renders:1", "2..60"),
+        ("renders:x", "2..60"),
+        ("presets:,", "name at least"),
+    ]:
         with pytest.raises(ParameterError, match=message):
             parse_set_spec(bad)
 
@@ -213,4 +218,6 @@ def test_resampling_keeps_the_band_level(rng, basis):
     y = resampled(x, 2800, 48000)
     assert y.size == 48000
     assert measure(y, 48000, basis)["level_db"] == pytest.approx(measure(x, 2800, basis)["level_db"], abs=0.1)
-    assert resampled(x, 2800, 2800) is not None and math.isclose(resampled(x, 44100, 48000).size, 2800 * 48000 / 44100, abs_tol=1)
+    assert resampled(x, 2800, 2800) is not None and math.isclose(
+        resampled(x, 44100, 48000).size, 2800 * 48000 / 44100, abs_tol=1
+    )

@@ -395,8 +395,8 @@ def analyze_dissimilarity(
     InputError
         Sessions of another protocol or set, no ratings, or a stimulus that cannot be analysed.
     """
-    from vibsynth.research.dissim import RatingsTable, fit_dissimilarity_weights, mds_map, scores_for_files
     from vibsynth.dsp.dissimilarity import local_distances
+    from vibsynth.research.dissim import RatingsTable, fit_dissimilarity_weights, mds_map, scores_for_files
 
     ids = check_compatible(sessions)
     if sessions[0].protocol != "dissimilarity":

@@ -67,7 +67,9 @@ class SessionRequest:
         check_participant(self.participant)
         check_seed(self.seed)
         if self.normalise is not None and self.normalise not in NORMALISE_MODES:
-            raise ParameterError(f"unknown normalisation {self.normalise!r}; choose one of {', '.join(NORMALISE_MODES)}")
+            raise ParameterError(
+                f"unknown normalisation {self.normalise!r}; choose one of {', '.join(NORMALISE_MODES)}"
+            )
 
 
 def default_normalise(protocol: str, stimulus_set: StimulusSet) -> str:
@@ -126,7 +128,11 @@ def new_session(
             played.append(reference)
     elif protocol == "resynthesis":
         for index, original in enumerate(prepared.stimuli):
-            played += [v for name, v in resynthesis_versions(original, basis=basis, seed=request.seed, index=index).items() if name != "O"]
+            played += [
+                v
+                for name, v in resynthesis_versions(original, basis=basis, seed=request.seed, index=index).items()
+                if name != "O"
+            ]
     plan: Plan = make_plan(
         protocol,
         prepared.ids,

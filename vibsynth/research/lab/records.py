@@ -215,7 +215,9 @@ def make_row(
     else:
         if set(answer.ratings) != set(VERSIONS):
             raise ParameterError(f"rate all five versions ({', '.join(VERSIONS)}), got {sorted(answer.ratings)}")
-        ratings = {v: _number(f"rating of slot {trial.slots.index(v) + 1}", answer.ratings[v], 0.0, 1.0) for v in VERSIONS}
+        ratings = {
+            v: _number(f"rating of slot {trial.slots.index(v) + 1}", answer.ratings[v], 0.0, 1.0) for v in VERSIONS
+        }
         if max(ratings.values()) != 1.0:
             raise ParameterError("set the most similar version to 1 (the top of its slider)")
         original = trial.stimuli[0]
@@ -246,15 +248,18 @@ def check_row(protocol: Protocol, row: Mapping[str, str], trial: Trial) -> None:
         raise ValueError(f"trial {row.get('trial')!r} where trial {trial.index} was expected")
     if protocol == "intensity":
         ids: tuple[str, ...] = (row["stimulus"],)
+        files: tuple[str, ...] = (row["file"],)
         gain = float(row["gain"])
         if not (math.isfinite(gain) and gain > 0):
             raise ValueError(f"gain {row['gain']} is not a positive number")
     elif protocol == "dissimilarity":
         ids = (row["stimulus_a"], row["stimulus_b"])
+        files = (row["file_a"], row["file_b"])
         if not 0.0 <= float(row["rating"]) <= 1.0:
             raise ValueError(f"rating {row['rating']} outside 0..1")
     else:
         ids = (row["original"],)
+        files = (stimulus_file(row["original"]),)
         slots = tuple(row[f"slot_{k}"] for k in range(1, 6))
         if slots != trial.slots:
             raise ValueError(f"slots {slots} differ from the plan's {trial.slots}")
@@ -263,5 +268,7 @@ def check_row(protocol: Protocol, row: Mapping[str, str], trial: Trial) -> None:
                 raise ValueError(f"rating of {v} outside 0..1")
     if ids != trial.stimuli:
         raise ValueError(f"stimuli {', '.join(ids)} differ from the plan's {', '.join(trial.stimuli)}")
+    if files != tuple(stimulus_file(s) for s in ids):
+        raise ValueError(f"files {', '.join(files)} are not the stimuli's")
     parse_timestamp(row["shown_at"])
     parse_timestamp(row["answered_at"])

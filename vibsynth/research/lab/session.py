@@ -136,7 +136,6 @@ def _lock(fd: int, path: Path) -> None:
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
-        os.close(fd)
         raise InputError(f"{path}: the session is open in another runner") from None
 
 
@@ -347,6 +346,7 @@ class Session:
                 raise InputError(f"{target}: cannot create ({exc.strerror or exc})") from None
         else:
             target = _claim_folder(Path(root).expanduser(), _session_name(who, name, now))
+        fd: int | None = None
         try:
             (target / STIMULI_DIR).mkdir()
             entries: dict[str, Any] = {}
@@ -380,6 +380,8 @@ class Session:
             os.fsync(fd)
             fsync_folder(target)
         except BaseException as exc:
+            if fd is not None:
+                os.close(fd)
             shutil.rmtree(target, ignore_errors=True)  # the folder this call created, nothing else
             if isinstance(exc, OSError):
                 raise InputError(f"{target}: cannot write the session ({exc.strerror or exc})") from None
@@ -575,7 +577,9 @@ def _read_rows(data: bytes, path: Path, protocol: Protocol, plan: Plan) -> list[
     reader = csv.reader(io.StringIO(text))
     header = tuple(next(reader, ()))
     if header != columns(protocol):
-        raise InputError(f"{path}:1: the header is not the {protocol} protocol's ({', '.join(columns(protocol)[:4])}...)")
+        raise InputError(
+            f"{path}:1: the header is not the {protocol} protocol's ({', '.join(columns(protocol)[:4])}...)"
+        )
     rows: list[dict[str, str]] = []
     try:
         for line, values in enumerate(reader, start=2):
@@ -618,7 +622,11 @@ def list_sessions(root: str | os.PathLike[str]) -> tuple[list[SessionInfo], list
     except OSError as exc:
         return [], [f"{base}: cannot list ({exc.strerror or exc})"]
     for entry in entries:
-        if entry.name.startswith(".") or not entry.is_dir() or not os.path.isfile(os.path.join(entry.path, SESSION_FILE)):
+        if (
+            entry.name.startswith(".")
+            or not entry.is_dir()
+            or not os.path.isfile(os.path.join(entry.path, SESSION_FILE))
+        ):
             continue
         try:
             with Session.open(entry.path) as session:

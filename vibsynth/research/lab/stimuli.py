@@ -203,7 +203,9 @@ def parse_set_spec(text: str) -> SetSpec:
     """
     spec = text.strip() if isinstance(text, str) else ""
     if not spec or len(spec) > 4096 or "\x00" in spec:
-        raise ParameterError("stimulus set: give 'presets', 'presets:NAME,NAME,...', 'renders', 'renders:N' or a folder")
+        raise ParameterError(
+            "stimulus set: give 'presets', 'presets:NAME,NAME,...', 'renders', 'renders:N' or a folder"
+        )
     head, _, tail = spec.partition(":")
     if head == "presets":
         names = tuple(n.strip() for n in tail.split(",") if n.strip()) if tail else ()
@@ -400,7 +402,9 @@ def load_presets(
         raise InputError("no presets to make stimuli of")
     if len(presets) > MAX_STIMULI:
         raise InputError(f"{len(presets)} presets; a set has at most {MAX_STIMULI} stimuli (name fewer: presets:a,b)")
-    shaper = SpectralShaper(fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order)
+    shaper = SpectralShaper(
+        fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order
+    )
     rng = np.random.default_rng([seed, PHASES_STREAM])
     stimuli = []
     for preset in presets:
@@ -440,7 +444,9 @@ def load_renders(
     """
     if not 2 <= count <= MAX_STIMULI:
         raise ParameterError(f"renders: the count must be 2..{MAX_STIMULI}, got {count}")
-    shaper = SpectralShaper(fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order)
+    shaper = SpectralShaper(
+        fs=fs, n_samples=int(round(seconds * fs)), centres=basis.centres_hz, order=basis.filter_order
+    )
     rng = np.random.default_rng([seed, PHASES_STREAM])
     level = knob_to_level_db(intensity, ceiling_db=ceiling_db, range_db=range_db)
     stimuli = []
@@ -507,7 +513,14 @@ def load_set(
     else:
         chosen = [library[n] for n in sorted(library)]
     return load_presets(
-        chosen, fs=fs, seconds=seconds, seed=seed, basis=basis, ceiling_db=ceiling_db, range_db=range_db, name=parsed.text
+        chosen,
+        fs=fs,
+        seconds=seconds,
+        seed=seed,
+        basis=basis,
+        ceiling_db=ceiling_db,
+        range_db=range_db,
+        name=parsed.text,
     )
 
 
