@@ -14,8 +14,8 @@ from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, Val
 
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
-from vibsynth.settings.models_sources import Sources, knob_conflict
 from vibsynth.settings.models_lab import Lab
+from vibsynth.settings.models_sources import Sources, knob_conflict
 from vibsynth.settings.models_studio import Studio
 from vibsynth.settings.values import (
     BINDABLE_CC_MAX,
