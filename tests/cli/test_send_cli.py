@@ -120,6 +120,8 @@ def test_no_traceback_from_the_console_script():
 def test_prefix_of():
     assert prefix_of("/vibsynth/ch/2/intensity") == "/vibsynth"
     assert prefix_of("/vibsynth/ch/*/balance") == "/vibsynth"
+    assert prefix_of("/vibsynth/source/3/pos") == "/vibsynth"
+    assert prefix_of("/haptics/source/*/get") == "/haptics"
     assert prefix_of("/vibsynth/status") == "/vibsynth"
     assert prefix_of("/haptics/texture") == "/haptics"
     assert prefix_of("/intensity") == ""

@@ -33,6 +33,7 @@ HELP = """\
 Send one OSC message over UDP, e.g.
   vibsynth send /vibsynth/intensity 0.5
   vibsynth send /vibsynth/ch/2/texture 0.4 -1
+  vibsynth send /vibsynth/source/1/pos 0.02 0.1     (a touch source, with a layout: docs/vr.md)
   vibsynth send /vibsynth/status --wait-reply 1
   vibsynth send /vibsynth/preset 3 --types s        (force types: the name "3" as a string)
   vibsynth send /vibsynth/intensity 0.8 --delay 2   (bundle timetagged 2 s ahead)
@@ -46,7 +47,7 @@ _INT = re.compile(r"[+-]?\d+\Z")
 _QUIET_S = 0.05
 #: Without --wait-reply, how long to wait for the server to confirm (it answers in about a millisecond).
 CONFIRM_S = 0.5
-_CHANNEL = re.compile(r"/ch/[^/]*\Z")
+_CHANNEL = re.compile(r"/(?:ch|source)/[^/]*\Z")
 
 
 def infer(text: str) -> tuple[object, str]:
@@ -130,7 +131,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 
 def prefix_of(address: str) -> str:
-    """The server prefix an address was sent under: ``/vibsynth/ch/2/intensity`` -> ``/vibsynth``."""
+    """The server prefix an address was sent under: ``/vibsynth/ch/2/intensity`` (or ``/vibsynth/source/1/pos``)
+    -> ``/vibsynth``."""
     head = address.rstrip("/").rsplit("/", 1)[0]
     return _CHANNEL.sub("", head)
 

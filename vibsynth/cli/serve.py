@@ -85,6 +85,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _config(args: argparse.Namespace) -> Any:
     extra = {"audio.channels": args.channels, "audio.backend": args.output, "audio.device": args.device}
+    extra["layout"] = getattr(args, "layout", None)  # --layout (control/spatial/adapter.py)
     if args.wav and args.output is None:
         extra["audio.backend"] = "wav"
     from vibsynth.settings.config import config_from_args

@@ -211,10 +211,10 @@ def test_pattern_errors_name_the_problem(bad, fragment):
 
 def test_sixty_four_channels_fit_the_fanout_cap():
     space = AddressSpace("/vibsynth", 64)
-    assert len(space.addresses) == 15 + 8 * 64 <= MAX_FANOUT
+    assert len(space.addresses) == 15 + 8 * 64 + 16 * 10 <= MAX_FANOUT  # the globals, channels, sources
     routes = space.match("/vibsynth/ch/*/intensity")
     assert [r.channel for r in routes] == list(range(64)) and {r.method for r in routes} == {"intensity"}
-    assert len(space.match("/vibsynth/*/*/*")) == 512
+    assert len(space.match("/vibsynth/*/*/*")) == 512 + 160
 
 
 def test_fanout_beyond_the_cap_is_an_error_and_nothing_is_done():

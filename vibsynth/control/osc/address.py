@@ -27,6 +27,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from vibsynth.errors import ConfigError, ParameterError
+from vibsynth.settings.models_sources import MAX_SOURCES
 
 __all__ = [
     "PATTERN_CHARS",
@@ -39,6 +40,7 @@ __all__ = [
     "normalize_prefix",
     "GLOBAL_METHODS",
     "CHANNEL_METHODS",
+    "SOURCE_METHODS",
 ]
 
 PATTERN_CHARS = frozenset("*?[]{}")
@@ -49,8 +51,8 @@ MAX_PATTERN_LEN = 256
 MAX_FANOUT = 1024
 """Most routes one pattern may lead to; a pattern matching more is an error (nothing is done).
 
-The table holds ``15 + 8 x channels`` routes, 527 at the maximum of 64 channels
-(``audio.channels``), so every pattern, ``/vibsynth/ch/*/intensity`` and even
+The table holds ``15 + 8 x channels + 16 x 10`` routes (the sources'), 687 at the maximum of 64
+channels (``audio.channels``), so every pattern, ``/vibsynth/ch/*/intensity`` and even
 ``/vibsynth/*/*/*`` included, fits on every supported configuration; the cap bounds the
 work of one message should the table ever grow.
 """
@@ -77,6 +79,10 @@ GLOBAL_METHODS = (
 CHANNEL_METHODS = ("intensity", "balance", "texture", "glide", "mute", "preset", "speed", "get")
 """Methods under ``{prefix}/ch/{n}/``; they act on channel n only."""
 
+SOURCE_METHODS = ("pos", "texture", "intensity", "balance", "preset", "radius", "rolloff", "on", "speed", "get")
+"""Methods under ``{prefix}/source/{k}/`` (k = 1..16): the touch sources (docs/vr.md). Their routes
+are named ``source/<method>`` and carry the 0-based source index in ``Route.channel``."""
+
 # Token kinds of a compiled pattern part.
 _LITERAL, _ANY, _STAR, _SET, _CHOICE = range(5)
 
@@ -86,7 +92,9 @@ Token = tuple[int, object]
 
 @dataclass(frozen=True, slots=True)
 class Route:
-    """Where a concrete address leads: ``method`` name and 0-based ``channel`` (None = all)."""
+    """Where a concrete address leads: ``method`` name and 0-based ``channel`` (None = all).
+
+    For a source method (``source/pos``...) ``channel`` is the 0-based source index."""
 
     method: str
     channel: int | None
@@ -300,6 +308,9 @@ class AddressSpace:
         for ch in range(self.channels):
             for method in CHANNEL_METHODS:
                 self._routes[f"{self.prefix}/ch/{ch + 1}/{method}"] = Route(method, ch)
+        for k in range(MAX_SOURCES):
+            for method in SOURCE_METHODS:
+                self._routes[f"{self.prefix}/source/{k + 1}/{method}"] = Route(f"source/{method}", k)
         self._tree: dict = {}  # address parts -> nested dicts; the Route under the key None
         for address, route in self._routes.items():
             node = self._tree
@@ -327,8 +338,14 @@ class AddressSpace:
             n = int(parts[2][:12])
             if not 1 <= n <= self.channels:
                 return f"channel {n} out of range (this server has {self.channels} {plural}: 1..{self.channels})"
+        if len(parts) == 4 and parts[1] == "source" and parts[3] in SOURCE_METHODS and parts[2].isdigit():
+            k = int(parts[2][:12])
+            if not 1 <= k <= MAX_SOURCES:
+                return f"source {k} out of range (sources are 1..{MAX_SOURCES})"
         method = parts[-1] if parts else ""
-        candidates = CHANNEL_METHODS if len(parts) == 4 and parts[1] == "ch" else GLOBAL_METHODS
+        candidates: tuple[str, ...] = CHANNEL_METHODS if len(parts) == 4 and parts[1] == "ch" else GLOBAL_METHODS
+        if len(parts) == 4 and parts[1] == "source":
+            candidates = SOURCE_METHODS
         # a near miss of a real method name only: difflib's cost grows with the text, and an
         # attacker chooses the text, so long or non-ASCII names are not compared at all
         short = len(method) <= 16 and method.isascii()
@@ -338,9 +355,12 @@ class AddressSpace:
         return "unknown address"
 
     def address_of(self, method: str, channel: int | None = None) -> str:
-        """The concrete address of a method (``channel`` 0-based, None = global form)."""
+        """The concrete address of a method (``channel`` 0-based, None = global form; a source method's
+        ``channel`` is its source index)."""
         if channel is None:
             return f"{self.prefix}/{method}"
+        if method.startswith("source/"):
+            return f"{self.prefix}/source/{channel + 1}/{method[7:]}"
         return f"{self.prefix}/ch/{channel + 1}/{method}"
 
     def match(self, address: str) -> tuple[Route, ...]:

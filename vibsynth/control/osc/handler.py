@@ -45,6 +45,7 @@ from vibsynth.control.osc.replies import (
     is_loopback,
     redact_paths,
 )
+from vibsynth.control.osc.sources import SourceMethods
 from vibsynth.control.osc.speed import SpeedCurve
 from vibsynth.control.osc.workers import Notifier, PeerLike, SyncWorker, setter_message
 from vibsynth.control.status import channel_status, engine_status, output_status
@@ -203,6 +204,7 @@ class OscHandler:
             "learn": self._on_learn,
             "monitor": self._on_monitor,
         }
+        self._methods.update(SourceMethods(self).methods())  # /vibsynth/source/{k}/... (control/osc/sources.py)
         # balance set by anything but /speed: the base that the speed shift is added to
         self._base_balance = [s.balance for s in controller.state()]
         # coalescing of immediate knob moves within one receive batch (see handle_batch)

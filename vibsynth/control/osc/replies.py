@@ -35,7 +35,7 @@ def is_loopback(host: str) -> bool:
 # An absolute path: /a/b, ~/a, C:\a or C:/a, not preceded by a word character or a path
 # character (so "mm/s" and "a/b" are left alone). One character class repeated: linear time.
 _PATH = re.compile(r"(?<![\w.~/\\-])(?:~|[A-Za-z]:)?[/\\][^\s'\"`,;:()\[\]{}<>]+")
-_OWN_PARTS = frozenset(GLOBAL_METHODS) | {"ch"}
+_OWN_PARTS = frozenset(GLOBAL_METHODS) | {"ch", "source"}
 
 
 def _is_osc_address(token: str, prefix: str) -> bool:
