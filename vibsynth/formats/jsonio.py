@@ -115,7 +115,7 @@ def parse_json(
     except _Refused as exc:
         raise error(f"{origin}: {exc}") from None
     except json.JSONDecodeError as exc:
-        truncated = exc.pos >= len(text.rstrip())
+        truncated = exc.pos >= len(text.rstrip()) or exc.msg.startswith("Unterminated string")
         hint = "; the file ends too early (truncated?)" if truncated else ""
         raise error(f"{origin}:{exc.lineno}:{exc.colno}: not valid JSON ({exc.msg}){hint}") from None
     except RecursionError:

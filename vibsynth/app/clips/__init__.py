@@ -1,0 +1,1 @@
+"""Haptic clips in the studio: the clip lane tab (:mod:`vibsynth.app.clips.studio`)."""
