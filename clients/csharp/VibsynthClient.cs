@@ -1116,6 +1116,15 @@ namespace Vibsynth
             Send(SourceAddress(source, "on"), "i", on ? 1 : 0);
         }
 
+        /// <summary>
+        /// Let a source's intensity follow its speed (true: through the server's speed curve, from its positions
+        /// over <c>sources.speed_window_ms</c>; at rest it is silent) or use its own intensity (false).
+        /// </summary>
+        public void SourceSpeed(int source, bool fromSpeed = true)
+        {
+            Send(SourceAddress(source, "speed"), "i", fromSpeed ? 1 : 0);
+        }
+
         /// <summary>Place a source, give it its knobs and turn it on or off, applied together (one bundle).</summary>
         public void SetSource(int source, float x, float y, float z, float intensity, float balance, bool on = true)
         {
@@ -1653,6 +1662,8 @@ namespace Vibsynth
 
         static bool IsNumber1(OscMessage m) { return m.Count == 1 && m.IsNumber(0); }
 
+        static bool IsFlag(OscMessage m) { return m.Count == 1 && (m.TypeTags == "i" || m.TypeTags == "T" || m.TypeTags == "F"); }
+
         Task<T> Get<T>(int channel, string what, Func<OscMessage, bool> shape, Func<OscMessage, T> convert, TimeSpan? timeout)
         {
             return Query(ChannelAddress(channel, ""), what, shape, convert, timeout);
@@ -1723,8 +1734,7 @@ namespace Vibsynth
         /// <summary>Is a channel muted?</summary>
         public Task<bool> GetMuteAsync(int channel = 1, TimeSpan? timeout = null)
         {
-            return Get(channel, "mute", m => m.Count == 1 && (m.TypeTags == "i" || m.TypeTags == "T" || m.TypeTags == "F"),
-                m => m.GetInt(0) != 0, timeout);
+            return Get(channel, "mute", IsFlag, m => m.GetInt(0) != 0, timeout);
         }
 
         /// <summary>Is a channel muted? Blocks up to the timeout.</summary>
@@ -1756,7 +1766,7 @@ namespace Vibsynth
         // -------------------------------------------------------------- source queries
         /// <summary>
         /// Any setting of a spatial source (<c>/vibsynth/source/{k}/get s what</c>: pos, texture, intensity, balance,
-        /// preset, radius, rolloff, on): the reply message in setter form (<c>/vibsynth/source/{k}/{what} ...</c>).
+        /// preset, radius, rolloff, on, speed): the reply message in setter form (<c>/vibsynth/source/{k}/{what} ...</c>).
         /// </summary>
         public Task<OscMessage> GetSourceAsync(int source, string what, TimeSpan? timeout = null)
         {
@@ -1808,12 +1818,30 @@ namespace Vibsynth
         /// <summary>Is a source on?</summary>
         public Task<bool> GetSourceOnAsync(int source, TimeSpan? timeout = null)
         {
-            return GetSource(source, "on", m => m.Count == 1 && (m.TypeTags == "i" || m.TypeTags == "T" || m.TypeTags == "F"),
-                m => m.GetInt(0) != 0, timeout);
+            return GetSource(source, "on", IsFlag, m => m.GetInt(0) != 0, timeout);
         }
 
         /// <summary>Is a source on? Blocks up to the timeout.</summary>
         public bool GetSourceOn(int source, TimeSpan? timeout = null) { return Wait(GetSourceOnAsync(source, timeout)); }
+
+        /// <summary>Does a source's intensity follow its speed?</summary>
+        public Task<bool> GetSourceSpeedAsync(int source, TimeSpan? timeout = null)
+        {
+            return GetSource(source, "speed", IsFlag, m => m.GetInt(0) != 0, timeout);
+        }
+
+        /// <summary>Does a source's intensity follow its speed? Blocks up to the timeout.</summary>
+        public bool GetSourceSpeed(int source, TimeSpan? timeout = null) { return Wait(GetSourceSpeedAsync(source, timeout)); }
+
+        /// <summary>The preset a source last got, or null when none.</summary>
+        public Task<string> GetSourcePresetAsync(int source, TimeSpan? timeout = null)
+        {
+            return GetSource(source, "preset", m => m.Count == 1 && m.IsString(0),
+                m => m.GetString(0).Length == 0 ? null : m.GetString(0), timeout);
+        }
+
+        /// <summary>The preset a source last got, or null; blocks up to the timeout.</summary>
+        public string GetSourcePreset(int source, TimeSpan? timeout = null) { return Wait(GetSourcePresetAsync(source, timeout)); }
 
         // -------------------------------------------------------------- server queries
         /// <summary>The server's status pairs (<c>/vibsynth/status</c>).</summary>

@@ -76,3 +76,9 @@ def build_client_check(folder: Path) -> Path:
     """``ClientCheck.exe`` (the client and the test program) compiled into ``folder``; skips without mono."""
     require_mono()
     return compile_cs(folder / "ClientCheck.exe", CLIENT, CHECK, CHECK_MAIN)
+
+
+def build_unity_check(folder: Path) -> Path:
+    """``UnityCheck.exe`` (the client, the Unity example, the UnityEngine shim, the test program) in ``folder``."""
+    require_mono()
+    return compile_cs(folder / "UnityCheck.exe", CLIENT, UNITY_EXAMPLE, UNITY_SHIM, UNITY_CHECK, CHECK_MAIN)

@@ -12,22 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.clients.mono import (
-    CHECK_MAIN,
-    CLIENT,
-    UNITY_CHECK,
-    UNITY_EXAMPLE,
-    UNITY_SHIM,
-    compile_cs,
-    require_mono,
-    run_mono,
-)
-
-
-def build_unity_check(folder: Path) -> Path:
-    """The client, the example, the shim and UnityCheck.cs compiled into ``folder``; skips without mono."""
-    require_mono()
-    return compile_cs(folder / "UnityCheck.exe", CLIENT, UNITY_EXAMPLE, UNITY_SHIM, UNITY_CHECK, CHECK_MAIN)
+from tests.clients.mono import UNITY_EXAMPLE, UNITY_SHIM, build_unity_check, run_mono
 
 
 @pytest.fixture(scope="module")
@@ -63,6 +48,8 @@ def test_a_contact_becomes_a_source_that_follows_it_and_turns_off(unity_check):
     # the first contact: the mean of its two points, in the layout's frame (origin at (1, 0, 2)),
     # with the inspector's knobs, radius and law, turned on, as one bundle
     first = [_message(m) for m in packets[0].split(" | ")]
+    assert first[0] == ("/vibsynth/source/3/speed", "i", [0])  # intensityFromSpeed off in this scene
+    first = first[1:]
     assert [(a, t) for a, t, _ in first] == [
         ("/vibsynth/source/3/pos", "fff"),
         ("/vibsynth/source/3/texture", "ff"),

@@ -12,12 +12,13 @@ Run: ``.venv/bin/python -m pytest tests/e2e/test_csharp_client.py -q``.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
 
 import vibsynth
-from tests.clients.mono import build_client_check, run_mono
+from tests.clients.mono import build_client_check, build_unity_check, run_mono
 from tests.e2e.oscclient import free_udp_port
 from tests.e2e.test_osc_e2e import start_serve, stop_serve
 
@@ -151,3 +152,80 @@ def test_threads_and_async_queries_get_their_own_answers(server, client_check):
     assert seen["threads.wrong"] == "0"
     assert seen["async.count"] == "300"
     assert seen["async.mismatched"] == "0"
+
+
+# ---------------------------------------------------------------------- spatial sources
+@pytest.fixture(scope="module")
+def glove(tmp_path_factory, client_check):
+    """A ``vibsynth serve`` with the glove layout (thumb, index, middle, ring, little, palm); yields its port."""
+    tmp = tmp_path_factory.mktemp("csharp-glove")
+    proc, port = start_serve(tmp, extra_config="audio:\n  channels: 6\nlayout: glove\n")
+    try:
+        yield port
+    finally:
+        stop_serve(proc)
+
+
+def _plays(client: vibsynth.Client, channel: int, want: tuple[float, float], timeout: float = 5.0) -> tuple:
+    """What ``channel`` plays, once it is ``want`` (the mixer updates every 10 ms) or the timeout passed."""
+    deadline = time.monotonic() + timeout
+    while True:
+        got = client.get("texture", channel)
+        if got == pytest.approx(want, abs=1e-4) or time.monotonic() > deadline:
+            return got
+        time.sleep(0.02)
+
+
+def _source(client: vibsynth.Client, k: int, what: str) -> tuple:
+    want = f"/vibsynth/source/{k}/{what}"
+    return client.request(f"/vibsynth/source/{k}/get", what, types="s", match=lambda r: r.address == want).args
+
+
+def test_sources_are_set_queried_scheduled_and_mixed(glove, client_check):
+    seen = run_mono(client_check, "sources", glove)
+    assert seen["s1.pos"] == "-0.035,0.11,0"
+    assert _texture(seen["s1.texture"]) == (0.75, 1.5)
+    assert (seen["s1.radius"], seen["s1.rolloff"], seen["s1.on"], seen["s1.speed"]) == (
+        "0.03",
+        "Smooth",
+        "true",
+        "false",
+    )
+    assert seen["s2.pos"] == "0.03,0.04,0.005"
+    assert _texture(seen["s2.texture"]) == (0.5, -1.0)
+    assert (seen["s2.radius"], seen["s2.rolloff"], seen["s2.on"], seen["s2.speed"]) == (
+        "0.12",
+        "Phantom",
+        "true",
+        "true",
+    )
+    assert _texture(seen["s2.texture2"]) == (0.25, 0.5)
+    assert seen["s2.pos2"] == "0.01,-0.02,0"  # two coordinates: z = 0
+    assert (seen["s2.preset"], seen["s1.preset"], seen["s2.off"]) == ("velvet", "none", "false")
+    assert seen["s1.generic"] == "/vibsynth/source/1/intensity f 0.75"
+    # the timetagged move waited for its time
+    assert seen["s1.pos_scheduled"] == "-0.035,0.11,0" and seen["s1.pos_after"] == "-0.005,0.12,0"
+    # refusals carry the server's text and change nothing
+    assert seen["bad_setting.message"].startswith("unknown source setting 'colour'; known: pos, texture")
+    assert seen["bad_values.count"] == "2"
+    assert seen["bad_values.error0"].startswith("/vibsynth/source/1/preset: unknown preset 'no-such-preset'")
+    assert seen["bad_values.error1"] == "/vibsynth/source/1/balance: balance 5 is outside the allowed range [-3.5, 3.5]"
+    assert _texture(seen["s1.texture_after_refusals"]) == (0.75, 1.5)
+    # the engine's side, read by the Python client: source 1 sits on the index fingertip (channel 2),
+    # alone and at distance 0, so channel 2 plays exactly its knobs; the palm is out of its reach
+    with vibsynth.Client(port=glove, timeout=5.0) as python_client:
+        assert _source(python_client, 1, "pos") == pytest.approx((-0.035, 0.11, 0.0))
+        assert _source(python_client, 2, "on") == (0,)
+        assert _plays(python_client, 2, (0.75, 1.5)) == pytest.approx((0.75, 1.5), abs=1e-4)
+        assert python_client.get("texture", 6) == (0.0, 0.0)
+
+
+def test_the_unity_example_drives_a_source_on_a_real_server(glove, tmp_path):
+    seen = run_mono(build_unity_check(tmp_path), "server", glove)
+    # the contact at world (1.01, 0, 2.02), the layout's origin at (1, 0, 2)
+    assert [float(v) for v in seen["pos"].split(",")] == pytest.approx([0.01, 0.0, 0.02], abs=1e-6)
+    assert seen["on"] == "true" and _texture(seen["texture"]) == pytest.approx((0.7, -1.0))
+    assert (float(seen["radius"]), seen["rolloff"], seen["speed_mode"]) == (pytest.approx(0.04), "Phantom", "false")
+    assert [float(v) for v in seen["pos2"].split(",")] == pytest.approx([0.03, 0.0, 0.01], abs=1e-6)
+    assert seen["on_after_exit"] == "false"
+    assert seen["warnings"] == "0"

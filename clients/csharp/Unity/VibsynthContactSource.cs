@@ -2,7 +2,7 @@
 // vibsynth touch source. Where it touches, expressed in the actuator layout's frame, is the source's
 // position; the source is on while something touches and off when the last contact ends. The server
 // mixes the source onto the actuators near that point (its layout, radius and roll-off law), and with
-// `sources.speed: true` in its config derives the source's intensity from how fast the point moves.
+// Intensity From Speed derives the source's intensity from how fast the point moves (its speed curve).
 //
 // Needs VibsynthClient.cs in the project. Put it on a GameObject with a Collider and a Rigidbody (or
 // touched by one), e.g. a fingertip or a tool; set Layout Frame to the Transform whose origin and axes
@@ -40,7 +40,7 @@ public sealed class VibsynthContactSource : MonoBehaviour
              "Empty: world coordinates")]
     public Transform layoutFrame;
 
-    [Tooltip("The source's intensity while touching, 0..1 (with sources.speed the server scales it by speed)")]
+    [Tooltip("The source's intensity while touching, 0..1 (not used with Intensity From Speed)")]
     [Range(0f, 1f)]
     public float intensity = 0.8f;
 
@@ -54,6 +54,10 @@ public sealed class VibsynthContactSource : MonoBehaviour
 
     [Tooltip("How the source fades with distance to an actuator")]
     public Rolloff rolloff = Rolloff.Smooth;
+
+    [Tooltip("The server derives the intensity from how fast the contact slides (its speed curve): " +
+             "a sliding finger feels the texture, a resting one does not")]
+    public bool intensityFromSpeed = true;
 
     [Tooltip("Position messages per second at most while touching (physics may run faster)")]
     [Range(10f, 500f)]
@@ -120,8 +124,14 @@ public sealed class VibsynthContactSource : MonoBehaviour
         Vector3 point;
         if (client == null || !ContactInLayout(collision, out point)) return;
         Track(point, Time.time);
-        if (first) // everything at once, applied together: where, what, how far, on
-            Send(() => client.SetSource(source, point.x, point.y, point.z, intensity, balance, radius, rolloff, true));
+        if (first) // everything at once, applied together: how it is felt, where, on
+            Send(() =>
+            {
+                VibsynthBundle touch = client.Bundle();
+                touch.SourceSpeed(source, intensityFromSpeed);
+                touch.SetSource(source, point.x, point.y, point.z, intensity, balance, radius, rolloff, true);
+                touch.Send();
+            });
         else // another collider while touching: the source moves to the newest contact
             Send(() => client.SourcePosition(source, point.x, point.y, point.z));
         lastSentTime = Time.time;

@@ -470,42 +470,71 @@ static class ClientCheck
     }
 
     // ------------------------------------------------------------------ spatial sources and clips
+    // On a server with the glove layout (6 channels: thumb, index, middle, ring, little, palm).
     static void Sources(int port)
     {
         using (var client = new VibsynthClient("127.0.0.1", port))
         {
             client.Timeout = TimeSpan.FromSeconds(5);
-            client.SetSource(1, 0.02f, -0.01f, 0f, 0.75f, 1.5f, 0.08f, Rolloff.Smooth, true);
+            // source 1 on the index fingertip (-0.035, 0.110, 0), everything in one bundle
+            client.SetSource(1, -0.035f, 0.110f, 0f, 0.75f, 1.5f, 0.03f, Rolloff.Smooth, true);
+            // source 2 built message by message
             client.SourcePosition(2, 0.03f, 0.04f, 0.005f);
             client.SourceTexture(2, 0.5f, -1f);
             client.SourceRadius(2, 0.12f);
             client.SourceRolloff(2, Rolloff.Phantom);
+            client.SourceSpeed(2, true);
             client.SourceOn(2, true);
             client.Sync();
-            float[] p = client.GetSourcePosition(1);
-            Say("s1.pos", string.Format(Inv, "{0:R},{1:R},{2:R}", p[0], p[1], p[2]));
+            Say("s1.pos", Position(client.GetSourcePosition(1)));
             Say("s1.texture", client.GetSourceTexture(1));
             Say("s1.radius", client.GetSourceRadius(1));
             Say("s1.rolloff", client.GetSourceRolloff(1));
             Say("s1.on", client.GetSourceOn(1));
-            p = client.GetSourcePosition(2);
-            Say("s2.pos", string.Format(Inv, "{0:R},{1:R},{2:R}", p[0], p[1], p[2]));
+            Say("s1.speed", client.GetSourceSpeed(1));
+            Say("s2.pos", Position(client.GetSourcePosition(2)));
             Say("s2.texture", client.GetSourceTexture(2));
             Say("s2.radius", client.GetSourceRadius(2));
             Say("s2.rolloff", client.GetSourceRolloff(2));
             Say("s2.on", client.GetSourceOn(2));
+            Say("s2.speed", client.GetSourceSpeed(2));
             client.SourceIntensity(2, 0.25f);
             client.SourceBalance(2, 0.5f);
+            client.SourcePosition(2, 0.01f, -0.02f);
             client.Sync();
             Say("s2.texture2", client.GetSourceTexture(2));
+            Say("s2.pos2", Position(client.GetSourcePosition(2)));
+            client.SourcePreset(2, "velvet");
+            client.Sync();
+            Say("s2.preset", client.GetSourcePreset(2));
+            Say("s1.preset", client.GetSourcePreset(1) ?? "none");
             client.SourceOn(2, false);
+            client.SourceSpeed(2, false);
             client.Sync();
             Say("s2.off", client.GetSourceOn(2));
-            Say("s1.generic", client.GetSource(1, "texture"));
-            Report("s1.bad_rolloff", () => client.GetSource(1, "colour"));
+            Say("s1.generic", client.GetSource(1, "intensity"));
+            // a timetagged source move: scheduled, applied later
+            VibsynthBundle later = client.At(0.4);
+            later.SourcePosition(1, -0.005f, 0.120f, 0f); // the middle fingertip
+            later.Send();
+            client.Sync();
+            Say("s1.pos_scheduled", Position(client.GetSourcePosition(1)));
+            Thread.Sleep(700);
+            Say("s1.pos_after", Position(client.GetSourcePosition(1)));
+            client.SourcePosition(1, -0.035f, 0.110f, 0f); // back to the index for the Python side
+            client.Sync();
+            // refusals
+            Report("bad_setting", () => client.GetSource(1, "colour"));
             client.SourcePreset(1, "no-such-preset");
-            Report("s1.bad_preset", () => client.Sync());
+            client.SourceBalance(1, 5f); // beyond the live range
+            Report("bad_values", () => client.Sync());
+            Say("s1.texture_after_refusals", client.GetSourceTexture(1));
         }
+    }
+
+    static string Position(float[] p)
+    {
+        return string.Format(Inv, "{0:R},{1:R},{2:R}", p[0], p[1], p[2]);
     }
 
     static void Clips(int port, string clip)

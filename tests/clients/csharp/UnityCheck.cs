@@ -47,6 +47,7 @@ static class UnityCheck
         component.radius = 0.04f;
         component.rolloff = Rolloff.Phantom;
         component.maxRateHz = 100f;
+        component.intensityFromSpeed = false;
         var frame = new Transform();
         frame.position = new Vector3(1f, 0f, 2f); // the layout's origin in the world
         component.layoutFrame = frame;
@@ -127,6 +128,7 @@ static class UnityCheck
             Say("texture", reader.GetSourceTexture(3));
             Say("radius", reader.GetSourceRadius(3));
             Say("rolloff", reader.GetSourceRolloff(3));
+            Say("speed_mode", reader.GetSourceSpeed(3));
             Time.time = 20.05f;
             Call(c, "OnCollisionStay", new Collision(new Vector3(1.03f, 0f, 2.01f)));
             reader.Sync();
