@@ -732,6 +732,33 @@ namespace Vibsynth
         }
     }
 
+    /// <summary>What clip a channel plays (<c>/vibsynth/ch/{n}/get clip</c>).</summary>
+    public struct ClipState
+    {
+        /// <summary>The clip's name, or null when the channel plays none.</summary>
+        public readonly string Name;
+        /// <summary>Where it is, in the clip's own time (ms; 0 for a clip timetagged to start later).</summary>
+        public readonly float PositionMs;
+        /// <summary>Repeats of its loop region still to come (-1 = until stopped).</summary>
+        public readonly int LoopsLeft;
+
+        public ClipState(string name, float positionMs, int loopsLeft)
+        {
+            Name = string.IsNullOrEmpty(name) ? null : name;
+            PositionMs = positionMs;
+            LoopsLeft = loopsLeft;
+        }
+
+        /// <summary>Does the channel play a clip?</summary>
+        public bool IsPlaying { get { return Name != null; } }
+
+        public override string ToString()
+        {
+            return Name == null ? "(no clip)" : string.Format(CultureInfo.InvariantCulture,
+                "({0} at {1} ms, {2} loops left)", Name, PositionMs, LoopsLeft);
+        }
+    }
+
     /// <summary>How a source's weight falls off with the distance d to an actuator (docs/vr.md).</summary>
     public enum Rolloff
     {
@@ -843,7 +870,9 @@ namespace Vibsynth
         public const float MaxClipRate = 20f;
         /// <summary>Most loop passes one play may ask for (0 = until stopped).</summary>
         public const int MaxClipLoops = 10000;
-        /// <summary>Longest preset or clip name sent, in UTF-8 bytes.</summary>
+        /// <summary>Longest clip name the server accepts, in characters.</summary>
+        public const int MaxClipName = 128;
+        /// <summary>Longest preset name sent, in UTF-8 bytes.</summary>
         public const int MaxNameBytes = 1024;
 
         internal VibsynthCommands() { }
@@ -1189,6 +1218,9 @@ namespace Vibsynth
             var args = new List<object>();
             var tags = new StringBuilder("s");
             args.Add(CheckName("clip name", name));
+            if (name.Length > MaxClipName)
+                throw new ArgumentException(string.Format(CultureInfo.InvariantCulture,
+                    "clip name is longer than {0} characters", MaxClipName), "name");
             if (gain.HasValue || rate.HasValue || loops.HasValue)
             {
                 args.Add(Check("gain", gain ?? 1f, 0f, MaxClipGain));
@@ -1749,6 +1781,16 @@ namespace Vibsynth
 
         /// <summary>The preset a channel last got, or null; blocks up to the timeout.</summary>
         public string GetPreset(int channel = 1, TimeSpan? timeout = null) { return Wait(GetPresetAsync(channel, timeout)); }
+
+        /// <summary>What clip a channel plays, where in it, and how many loops are left.</summary>
+        public Task<ClipState> GetClipAsync(int channel = 1, TimeSpan? timeout = null)
+        {
+            return Get(channel, "clip", m => m.Count == 3 && m.IsString(0) && m.IsNumber(1) && m.TypeTags[2] == 'i',
+                m => new ClipState(m.GetString(0), m.GetFloat(1), m.GetInt(2)), timeout);
+        }
+
+        /// <summary>What clip a channel plays; blocks up to the timeout.</summary>
+        public ClipState GetClip(int channel = 1, TimeSpan? timeout = null) { return Wait(GetClipAsync(channel, timeout)); }
 
         /// <summary>
         /// Any setting of a channel (<c>/vibsynth/ch/{n}/get s what</c>), e.g. one this client has no typed method

@@ -258,7 +258,7 @@ def _same(client: str, server: str) -> bool:
 def test_bad_arguments_raise_argument_exceptions_and_send_nothing(client_check):
     found = run_mono(client_check, "args", 9)  # the discard port: nothing is expected back
     bad = {k.removeprefix("bad."): v for k, v in found.items() if k.startswith("bad.")}
-    assert len(bad) == 40
+    assert len(bad) == 41
     for name, outcome in bad.items():
         assert outcome.startswith("ArgumentException: "), f"{name}: {outcome}"
     assert bad["intensity_nan"] == "ArgumentException: intensity must be a finite number, got NaN"

@@ -166,6 +166,7 @@ static class ClientCheck
                 Case("set_source_nan", () => client.SetSource(1, 0f, 0f, float.NegativeInfinity, 0.5f, 0f)),
                 Case("clip_channel_zero", () => client.PlayClip(0, "impact")),
                 Case("clip_name_empty", () => client.PlayClip(1, "")),
+                Case("clip_name_long", () => client.PlayClipAll(new string('c', 129))),
                 Case("clip_gain_negative", () => client.PlayClip(1, "impact", -0.5f)),
                 Case("clip_rate_zero", () => client.PlayClip(1, "impact", 1f, 0f)),
                 Case("clip_rate_nan", () => client.PlayClipAll("impact", 1f, float.NaN)),
@@ -537,21 +538,55 @@ static class ClientCheck
         return string.Format(Inv, "{0:R},{1:R},{2:R}", p[0], p[1], p[2]);
     }
 
+    // On a server with 3 channels and the clip player; `clip` is a shipped clip's name.
     static void Clips(int port, string clip)
     {
         using (var client = new VibsynthClient("127.0.0.1", port))
         {
             client.Timeout = TimeSpan.FromSeconds(5);
-            client.PlayClip(1, clip, 1f, 1f, 0);
+            client.SetGlide(0f);
+            client.SetTexture(0.2f, 0f);
             client.Sync();
-            Say("playing.status", client.Status().GetString("ch1.clip"));
+            Say("idle", client.GetClip(1));
+            client.PlayClip(1, clip, 1f, 1f, 0); // looping until stopped
+            client.PlayClip(2, clip, 0.5f, 2f, 3);
+            client.Sync();
+            Thread.Sleep(150);
+            ClipState one = client.GetClip(1);
+            Say("ch1.name", one.Name);
+            Say("ch1.playing", one.IsPlaying);
+            Say("ch1.position_ms", one.PositionMs);
+            Say("ch1.loops_left", one.LoopsLeft);
+            ClipState two = client.GetClip(2);
+            Say("ch2.name", two.Name);
+            Say("ch2.loops_left", two.LoopsLeft);
+            Say("ch3", client.GetClip(3));
+            VibsynthStatus status = client.Status();
+            Say("status.clips_playing", status.GetNumber("clips_playing"));
+            Say("status.ch1.clip", status.GetString("ch1.clip"));
             client.StopClip(1, 20f);
-            client.PlayClipAll(clip, 0.5f);
+            client.StopClip(2);
             client.Sync();
-            client.StopClipAll();
+            Thread.Sleep(200);
+            Say("stopped", client.GetClip(1));
+            Say("stopped.texture", client.GetTexture(1));
+            // every channel, started by a timetagged bundle 0.3 s ahead, then stopped for all
+            VibsynthBundle later = client.At(0.3);
+            later.PlayClipAll(clip, 0.8f, 1f, 0);
+            later.Send();
             client.Sync();
+            Say("all.before", client.GetClip(3));
+            Thread.Sleep(600);
+            Say("all.after", client.GetClip(3).Name);
+            client.StopClipAll(0f);
+            client.Sync();
+            Thread.Sleep(200);
+            Say("all.stopped", client.GetClip(3));
+            // refusals
             client.PlayClip(1, "no-such-clip");
-            Report("unknown_clip", () => client.Sync());
+            client.PlayClip(9, clip);
+            Report("refused", () => client.Sync());
+            Say("refused.ch1", client.GetClip(1));
         }
     }
 }
