@@ -15,6 +15,7 @@ from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, Val
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
 from vibsynth.settings.models_lab import Lab
+from vibsynth.settings.models_midi_clips import MidiClips
 from vibsynth.settings.models_sources import Sources, knob_conflict
 from vibsynth.settings.models_studio import Studio
 from vibsynth.settings.values import (
@@ -365,6 +366,7 @@ class VibsynthConfig(SettingsModel):
     actuator: Actuator = Field(default_factory=Actuator, description="the actuator's frequency response")
     osc: Osc = Field(default_factory=Osc, description="the OSC server")
     midi: Midi = Field(default_factory=Midi, description="the MIDI input")
+    midi_clips: MidiClips = Field(default_factory=MidiClips, description="MIDI notes that play haptic clips")
     speed: Speed = Field(default_factory=Speed, description="OSC /speed (mm/s) -> texture")
     presets: Presets = Field(default_factory=Presets, description="user presets and hot reload")
     clips: Clips = Field(default_factory=Clips, description="haptic clips: user folder, hot reload, AHAP/Meta mapping")
@@ -438,6 +440,14 @@ class VibsynthConfig(SettingsModel):
                     f"midi.channel_map = {self.midi.channel_map}: MIDI channel {midi_channel} targets actuator "
                     f"channel {max(target)} but audio.channels = {channels} (allowed: 1..{channels})",
                     "midi.channel_map",
+                    "audio.channels",
+                )
+        for i, entry in enumerate(self.midi_clips.notes):
+            if isinstance(entry.channels, list) and max(entry.channels) > channels:
+                raise cross_problem(
+                    f"midi_clips.notes[{i}].channels = {entry.channels}: actuator channel {max(entry.channels)} "
+                    f"but audio.channels = {channels} (allowed: 1..{channels})",
+                    "midi_clips.notes",
                     "audio.channels",
                 )
         from vibsynth.settings.layouts import layout_problem  # it reads layout files, checked by this model
