@@ -489,6 +489,44 @@ class _Commands:
             raise ParameterError(f"preset name must be a non-empty string, got {name!r}")
         self._emit(encode_message(self._address("preset", channel), (name,), "s"))
 
+    def play_clip(
+        self, name: str, channel: int | None = None, *, gain: float = 1.0, rate: float = 1.0, loops: int = 1
+    ) -> None:
+        """Play a haptic clip (docs/clips.md); in a timetagged bundle it starts at that exact sample.
+
+        Parameters
+        ----------
+        name : str
+            Clip name (``vibsynth clip list``); an unknown name is refused by the server.
+        channel : int, optional
+            1-based channel; None = every channel.
+        gain : float
+            Scales the clip's intensity, 0..4 (the result is clamped to 1).
+        rate : float
+            Playback rate, 0.05..20 (2 = twice as fast).
+        loops : int
+            Passes of the clip's loop region, 1..10000; 0 = until :meth:`stop_clip`.
+        """
+        if not isinstance(name, str) or not name:
+            raise ParameterError(f"clip name must be a non-empty string, got {name!r}")
+        if isinstance(loops, bool) or not isinstance(loops, int) or not 0 <= loops <= 10_000:
+            raise ParameterError(f"loops must be an integer in [0, 10000] (0 = until stopped), got {loops!r}")
+        args = (name, _number("gain", gain, 0.0, 4.0), _number("rate", rate, 0.05, 20.0), loops)
+        self._emit(encode_message(self._address("play", channel), args, "sffi"))
+
+    def stop_clip(self, channel: int | None = None, *, release_ms: float | None = None) -> None:
+        """Stop the clip playing on a channel (None = every channel); it glides back to its knob state.
+
+        Parameters
+        ----------
+        channel : int, optional
+            1-based channel; None = every channel.
+        release_ms : float, optional
+            Glide back over this long (ms, >= 0); None = the channel's glide.
+        """
+        args = () if release_ms is None else (_number("release (ms)", release_ms, 0.0),)
+        self._emit(encode_message(self._address("stop", channel), args, "f" * len(args)))
+
 
 # ---------------------------------------------------------------------- bundles
 class Bundle(_Commands):
@@ -496,8 +534,8 @@ class Bundle(_Commands):
 
     Made by :meth:`Client.bundle` (applied at once, together) and :meth:`Client.at` (timetagged:
     the server applies every command at the exact sample of that time). It has the same
-    setters as :class:`Client` and :meth:`add` for any other message. Only knob, glide, mute
-    and preset messages are scheduled by the server; ``panic`` and queries act at once.
+    setters as :class:`Client` and :meth:`add` for any other message. Only knob, glide, mute,
+    preset and clip play/stop messages are scheduled by the server; ``panic`` and queries act at once.
 
     Attributes
     ----------
@@ -967,6 +1005,35 @@ class Client(_Commands):
         if what == "preset":
             return value[0] or None
         return float(value[0])
+
+    def playing_clip(self, channel: int = 1, timeout: float | None = None) -> tuple[str, float, int] | None:
+        """What clip plays on a channel: ``(name, position_ms, loops_left)``, or None when none does.
+
+        ``position_ms`` is in the clip's own time; ``loops_left`` counts the repeats of its loop
+        region still to come (-1 = until stopped).
+
+        Raises
+        ------
+        ParameterError
+            A bad channel.
+        ServerError
+            The server refused (e.g. no such channel).
+        NoReplyError
+            No answer within the timeout.
+        """
+        base = f"{self._prefix}/ch/{_channel(channel, optional=False)}"
+
+        def match(reply: Reply) -> bool:
+            if reply.address != f"{base}/clip":
+                return False
+            args = reply.args
+            ok = len(args) == 3 and isinstance(args[0], str) and all(isinstance(a, (int, float)) for a in args[1:])
+            if not ok:
+                self.stats.malformed += 1
+            return ok
+
+        name, position, left = self.request(f"{base}/get", "clip", types="s", match=match, timeout=timeout).args
+        return None if not name else (str(name), float(position), int(left))
 
     def status(self, timeout: float | None = None) -> dict[str, Any]:
         """The server's ``/status.reply`` as a dict (docs/osc.md lists the keys).

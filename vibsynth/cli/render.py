@@ -10,6 +10,7 @@ import sys
 import numpy as np
 
 from vibsynth.app.render import LoopSource, RenderResult, Sink, loop_period, render
+from vibsynth.cli._clip_play import add_clip_play_arguments
 from vibsynth.cli._common import (
     add_basis_argument,
     basis_from_args,
@@ -49,6 +50,8 @@ Render noise with the paper's spectrum model (a texture loops seamlessly) to a W
   --from FILE --variant V     a recording's experiment-3 variant at the recording's own level:
                               S1 = M + t1 V1, S1:8 = all 8 components, S2:8 = all but the first, M = mean
   --midi FILE.mid             a MIDI performance through the live MIDI mapping and the real-time engine
+  --clip NAME                 a haptic clip (vibsynth clip list) through the real-time engine, as
+                              /vibsynth/play plays it (--gain, --clip-rate, --loops; docs/clips.md)
 The band powers of the result match the target within rounding (closed-form synthesis).
 The output is written as it renders: memory stays flat whatever --seconds. A texture longer
 than 8 s (at 48 kHz; 384,000 samples) repeats one seamless period of 4-8 s.
@@ -69,6 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     source.add_argument("--balance", type=finite_float, metavar="B", help="high/low balance (knob units)")
     source.add_argument("--from", dest="from_file", metavar="FILE", help="recording to re-synthesize")
     source.add_argument("--midi", metavar="FILE.mid", help="MIDI file to render through the MIDI mapping")
+    source.add_argument("--clip", metavar="NAME", help="haptic clip to render (see vibsynth clip list)")
     p.add_argument("--intensity", type=unit_interval, metavar="I", help="intensity knob 0..1 (with --balance)")
     p.add_argument(
         "--channel",
@@ -93,7 +97,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--ceiling-db", type=finite_float, default=DEFAULT_CEILING_DB, help="intensity knob ceiling (dB)")
     p.add_argument("--range-db", type=finite_float, default=DEFAULT_RANGE_DB, help="intensity knob range (dB)")
-    p.add_argument("--config", metavar="FILE", help="config file (with --midi)")
+    p.add_argument("--config", metavar="FILE", help="config file (with --midi or --clip)")
+    add_clip_play_arguments(p)
     add_quiet_argument(p)
     add_basis_argument(p)
     p.set_defaults(func=run)
@@ -116,6 +121,37 @@ def _render_midi(args: argparse.Namespace) -> RenderResult:
         RenderProgress("render", job.frames, job.fs, quiet=args.quiet) as progress,
     ):
         return render_midi_to(job, _FullScaleGuard(wav, args.format), progress=progress)
+
+
+def _render_clip(args: argparse.Namespace) -> RenderResult:
+    """A haptic clip through the engine, compiled as the live player compiles it."""
+    from vibsynth.app.clip_render import prepare_clip_render
+    from vibsynth.settings.clips import UnknownClipError, load_clip_library
+    from vibsynth.settings.config import load_config
+
+    overrides = {"audio": {"rate": int(args.rate)}} if args.rate else None
+    config = load_config(args.config, overrides=overrides)
+    library = load_clip_library(config)
+    try:
+        clip = library.get(args.clip)
+    except UnknownClipError as exc:  # a name typed on the command line: a usage error
+        raise ParameterError(str(exc)) from None
+    job = prepare_clip_render(
+        clip,
+        config=config,
+        basis=basis_from_args(args),
+        gain=args.gain,
+        rate=args.clip_rate,
+        loops=args.loops,
+        seconds=args.seconds,
+    )
+    with (
+        _writer(args, job.fs, job.engine.channels, job.frames) as wav,
+        RenderProgress("render", job.frames, job.fs, quiet=args.quiet) as progress,
+    ):
+        return render(
+            job.engine, job.frames, _FullScaleGuard(wav, args.format), timeline=job.timeline, progress=progress
+        )
 
 
 def _render_loop(args: argparse.Namespace) -> RenderResult:
@@ -188,9 +224,11 @@ def _warn_if_saturated(shaper: SpectralShaper, basis: Basis, weights: np.ndarray
 
 def run(args: argparse.Namespace) -> int:
     """Exit 0; 1 (one line) when a file cannot be read or written; bad arguments raise (exit 2)."""
+    if not args.clip and (args.gain, args.clip_rate, args.loops) != (1.0, 1.0, 1):
+        raise ParameterError("--gain, --clip-rate and --loops go with --clip NAME")
     try:
         check_target(args.output, writable=True)
-        result = _render_midi(args) if args.midi else _render_loop(args)
+        result = _render_midi(args) if args.midi else _render_clip(args) if args.clip else _render_loop(args)
     except OSError as exc:  # the output file: missing folder, a folder, no permission, disk full
         where = exc.filename if exc.filename is not None else args.output
         print(f"vibsynth: error: {where}: {exc.strerror or exc}", file=sys.stderr)

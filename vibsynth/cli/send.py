@@ -137,12 +137,12 @@ def prefix_of(address: str) -> str:
     return _CHANNEL.sub("", head)
 
 
-def exchange(client: Client, data: bytes, wait_s: float) -> tuple[list[Reply], bool]:
+def exchange(client: Client, data: bytes, wait_s: float, confirm_s: float = CONFIRM_S) -> tuple[list[Reply], bool]:
     """Send ``data`` and a ``/ping`` barrier; return ``(replies, answered)``.
 
     ``replies`` are the server's answers to ``data`` (the barrier's own are left out);
     ``answered`` tells whether the server answered at all. With ``wait_s`` = 0 only until
-    the barrier's answer (at most :data:`CONFIRM_S`); otherwise up to ``wait_s`` seconds,
+    the barrier's answer (at most ``confirm_s``); otherwise up to ``wait_s`` seconds,
     stopping 50 ms after the last reply once the barrier was answered.
     """
     token = random.randrange(1, 2**31)
@@ -151,7 +151,7 @@ def exchange(client: Client, data: bytes, wait_s: float) -> tuple[list[Reply], b
     client.send_packet(encode_message(ping, (token, "vibsynth send"), "is"))
     replies: list[Reply] = []
     answered = False
-    deadline = time.monotonic() + (wait_s if wait_s > 0 else CONFIRM_S)
+    deadline = time.monotonic() + (wait_s if wait_s > 0 else confirm_s)
     last = -math.inf  # arrival of the last reply to the message
     while True:
         now = time.monotonic()

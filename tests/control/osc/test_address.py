@@ -19,10 +19,19 @@ from pathlib import Path
 import pytest
 
 from tests.control.osc.fakes import FakePeer, make_controller
-from vibsynth.control.osc.address import MAX_FANOUT, MAX_PATTERN_LEN, AddressSpace, compile_pattern
+from vibsynth.control.osc.address import (
+    CHANNEL_METHODS,
+    GLOBAL_METHODS,
+    MAX_FANOUT,
+    MAX_PATTERN_LEN,
+    SOURCE_METHODS,
+    AddressSpace,
+    compile_pattern,
+)
 from vibsynth.control.osc.codec import encode_message
 from vibsynth.control.osc.handler import OscHandler
 from vibsynth.errors import ParameterError
+from vibsynth.settings.models_sources import MAX_SOURCES
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -211,10 +220,11 @@ def test_pattern_errors_name_the_problem(bad, fragment):
 
 def test_sixty_four_channels_fit_the_fanout_cap():
     space = AddressSpace("/vibsynth", 64)
-    assert len(space.addresses) == 15 + 8 * 64 + 16 * 10 <= MAX_FANOUT  # the globals, channels, sources
+    sources = len(SOURCE_METHODS) * MAX_SOURCES
+    assert len(space.addresses) == len(GLOBAL_METHODS) + len(CHANNEL_METHODS) * 64 + sources <= MAX_FANOUT
     routes = space.match("/vibsynth/ch/*/intensity")
     assert [r.channel for r in routes] == list(range(64)) and {r.method for r in routes} == {"intensity"}
-    assert len(space.match("/vibsynth/*/*/*")) == 512 + 160
+    assert len(space.match("/vibsynth/*/*/*")) == len(CHANNEL_METHODS) * 64 + sources
 
 
 def test_fanout_beyond_the_cap_is_an_error_and_nothing_is_done():
@@ -224,10 +234,10 @@ def test_fanout_beyond_the_cap_is_an_error_and_nothing_is_done():
     peer = FakePeer()
     handler.handle_packet(encode_message("/vibsynth/ch/*/intensity", (0.5,)), peer)  # 4 routes: fine
     assert [c.value for c in ctl.engine.commands] == [0.5]
-    handler.handle_packet(encode_message("/vibsynth/ch/*/*", (0.25,)), peer)  # 32 routes
+    handler.handle_packet(encode_message("/vibsynth/ch/*/*", (0.25,)), peer)  # 4 x every channel method
     address, message = peer.errors()[-1]
     assert address == "/vibsynth/ch/*/*"
-    assert "matches 32 addresses, more than the limit of 8" in message
+    assert f"matches {4 * len(CHANNEL_METHODS)} addresses, more than the limit of 8" in message
     assert [c.value for c in ctl.engine.commands] == [0.5]
     assert ctl.error_counts["osc.bad_pattern"] == 1
 
@@ -297,10 +307,10 @@ def test_pathological_patterns_match_in_linear_time():
     patterns = {
         "/vibsynth/" + "*a" * 40 + "x": 0,
         "/vibsynth/" + "*" * 28 + "x": 0,  # the regex took ~5 s on this one
-        "/vibsynth/" + "*" * 200: 15,
+        "/vibsynth/" + "*" * 200: len(GLOBAL_METHODS),
         "/vibsynth/" + "*" * 245 + "x": 0,
         "/vibsynth/ch/" + "*?" * 118 + "/*": 0,
-        "/vibsynth/ch/*/" + "{a,b,i,n,t,e,s,y,}*" * 12: 512,
+        "/vibsynth/ch/*/" + "{a,b,i,n,t,e,s,y,}*" * 12: len(CHANNEL_METHODS) * 64,
     }
     assert all(len(p) <= MAX_PATTERN_LEN for p in patterns)
     try:

@@ -18,9 +18,10 @@ How each part becomes moves
 * **smooth**: the clip's own curve (:meth:`Clip.value_at`) cut into linear pieces, split
   in halves until the line is within :data:`SMOOTH_TOLERANCE` knob units of the curve at
   the quarter, half and three-quarter points of every piece (pieces are never shorter
-  than :data:`SMOOTH_MIN_PIECE_MS`). For the smoothstep ease ``3u^2 - 2u^3`` this keeps
-  the error below 0.004 knob units everywhere (0.16 dB of intensity at the default 40 dB
-  range) with at most 16 pieces per segment.
+  than :data:`SMOOTH_MIN_PIECE_MS`). For the clip model's cosine ease this keeps the error
+  below 0.004 knob units everywhere (0.16 dB of intensity at the default 40 dB range), with
+  about 16 pieces for a segment spanning one knob unit (the count grows with the square
+  root of the span).
 * **transient** ``(t, intensity, balance, decay)``: at ``t`` the intensity jumps to
   ``max(curve, transient intensity)`` and the balance to the transient's balance; both
   then glide linearly back to the curve's value at ``t + decay`` over ``decay``. The

@@ -51,7 +51,7 @@ MAX_PATTERN_LEN = 256
 MAX_FANOUT = 1024
 """Most routes one pattern may lead to; a pattern matching more is an error (nothing is done).
 
-The table holds ``15 + 8 x channels + 16 x 10`` routes (the sources'), 687 at the maximum of 64
+The table holds ``17 + 10 x channels + 16 x 10`` routes (the sources'), 817 at the maximum of 64
 channels (``audio.channels``), so every pattern, ``/vibsynth/ch/*/intensity`` and even
 ``/vibsynth/*/*/*`` included, fits on every supported configuration; the cap bounds the
 work of one message should the table ever grow.
@@ -73,10 +73,12 @@ GLOBAL_METHODS = (
     "notify",
     "learn",
     "monitor",
+    "play",
+    "stop",
 )
 """Methods under ``{prefix}/``; they act on every channel (or on the server)."""
 
-CHANNEL_METHODS = ("intensity", "balance", "texture", "glide", "mute", "preset", "speed", "get")
+CHANNEL_METHODS = ("intensity", "balance", "texture", "glide", "mute", "preset", "speed", "get", "play", "stop")
 """Methods under ``{prefix}/ch/{n}/``; they act on channel n only."""
 
 SOURCE_METHODS = ("pos", "texture", "intensity", "balance", "preset", "radius", "rolloff", "on", "speed", "get")

@@ -23,6 +23,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
 
+from vibsynth.control.clips.status import clip_status
 from vibsynth.control.controller import Controller, KnobEvent, check_finite, check_range
 from vibsynth.control.midi import learn_hook as _midi_learn_hook
 from vibsynth.control.osc.address import AddressSpace
@@ -205,6 +206,10 @@ class OscHandler:
             "monitor": self._on_monitor,
         }
         self._methods.update(SourceMethods(self).methods())  # /vibsynth/source/{k}/... (control/osc/sources.py)
+        from vibsynth.control.osc.clips import ClipMethods  # imports this module (argument helpers)
+
+        self.clips = ClipMethods(self)  # play, stop (docs/clips.md)
+        self._methods.update(self.clips.methods())
         # balance set by anything but /speed: the base that the speed shift is added to
         self._base_balance = [s.balance for s in controller.state()]
         # coalescing of immediate knob moves within one receive batch (see handle_batch)
@@ -481,8 +486,11 @@ class OscHandler:
         _arg_count(msg, (1,), "setting name")
         name = _string(msg, 0, "setting")
         fields = ("intensity", "balance", "glide", "mute", "preset")
+        if name == "clip":
+            self.clips.reply_get(peer, channels)
+            return
         if name not in fields and name != "texture":
-            raise ParameterError(f"unknown setting {name!r}; known: {', '.join(fields + ('texture',))}")
+            raise ParameterError(f"unknown setting {name!r}; known: {', '.join(fields + ('texture', 'clip'))}")
         states = self.controller.state()
         chans = range(len(states)) if channels is None else channels
 
@@ -526,7 +534,7 @@ class OscHandler:
         if self.extra_status is not None:
             pairs.extend(self.extra_status())
         pairs += [("replies_truncated", self.stats.replies_truncated), ("replies_dropped", self.stats.replies_dropped)]
-        return pairs + channel_status(ctl)
+        return pairs + channel_status(ctl) + clip_status(ctl)
 
     def _on_status(self, msg: Message, channels, peer, at_frame) -> None:
         args: list[object] = []

@@ -1,0 +1,87 @@
+"""OSC methods of haptic clips: ``play`` and ``stop`` on channels, and what plays for ``get`` and ``/status``.
+
+Addresses (docs/clips.md, "Triggering from OSC")::
+
+    /vibsynth/ch/{n}/play  s name [f gain] [f rate] [i loops]    /vibsynth/play ...  (every channel)
+    /vibsynth/ch/{n}/stop  [f release_ms]                         /vibsynth/stop ...
+    /vibsynth/ch/{n}/get   s "clip"   ->  /vibsynth/ch/{n}/clip s name f position_ms i loops_left
+
+A bundle with a future timetag starts (or stops) the clip at that exact frame. The player is
+the controller's ``clips`` attribute (:class:`~vibsynth.control.clips.player.ClipPlayer`,
+attached by the service); without one, play and stop get an error reply.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from vibsynth.control.clips.player import ClipPlayer
+from vibsynth.control.clips.status import clip_values, player_of
+from vibsynth.control.controller import check_range
+from vibsynth.control.osc.codec import Message, encode_message
+from vibsynth.control.osc.handler import _arg_count, _number, _string
+from vibsynth.control.osc.workers import PeerLike
+from vibsynth.errors import ParameterError, VibsynthError
+
+if TYPE_CHECKING:
+    from vibsynth.control.osc.handler import OscHandler
+
+__all__ = ["SOURCE", "ClipMethods"]
+
+SOURCE = "osc"
+
+
+class ClipMethods:
+    """The clip addresses of one :class:`~vibsynth.control.osc.handler.OscHandler`."""
+
+    def __init__(self, handler: OscHandler) -> None:
+        self.handler = handler
+
+    def methods(self) -> dict[str, Any]:
+        """Method name -> handler function (``(msg, channels, peer, at_frame)``), for the handler's table."""
+        return {"play": self.on_play, "stop": self.on_stop}
+
+    def _player(self) -> ClipPlayer:
+        player = player_of(self.handler.controller)
+        if player is None:
+            raise VibsynthError("clips are not available (no clip player is running)")
+        return player
+
+    def on_play(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
+        _arg_count(msg, (1, 2, 3, 4), "clip name, then optional gain, rate, loops")
+        name = _string(msg, 0, "clip")
+        gain = _number(msg, 1, "gain") if len(msg.args) > 1 else 1.0
+        rate = _number(msg, 2, "rate") if len(msg.args) > 2 else 1.0
+        loops = _number(msg, 3, "loops") if len(msg.args) > 3 else 1.0
+        if len(name) > 128:
+            raise ParameterError(f"clip name longer than 128 characters ({len(name)})")
+        self._player().play(
+            name,
+            channels=channels,
+            gain=gain,
+            rate=rate,
+            loops=loops,
+            at_frame=at_frame,
+            source=SOURCE,  # type: ignore[arg-type]
+        )
+
+    def on_stop(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
+        _arg_count(msg, (0, 1), "optional release in ms")
+        release_s = None
+        if msg.args:
+            max_ms = self.handler.controller.limits.glide_max_s * 1000.0
+            release_s = check_range("release (ms)", _number(msg, 0, "release"), 0.0, max_ms) / 1000.0
+        self._player().stop(channels=channels, release_s=release_s, at_frame=at_frame, source=SOURCE)
+
+    # ------------------------------------------------------------------ queries
+    def reply_get(self, peer: PeerLike, channels: tuple[int, ...] | None) -> None:
+        """Answer ``get clip``: one ``/ch/{n}/clip s f i`` per channel (the global form when all agree)."""
+        prefix = self.handler.prefix
+        controller = self.handler.controller
+        chans = range(controller.channels) if channels is None else channels
+        per_channel = {c: clip_values(controller, c) for c in chans}
+        if channels is None and len(set(per_channel.values())) == 1:
+            peer.send(encode_message(f"{prefix}/clip", per_channel[0], "sfi"))
+            return
+        for c, vals in per_channel.items():
+            peer.send(encode_message(f"{prefix}/ch/{c + 1}/clip", vals, "sfi"))
