@@ -25,19 +25,30 @@ Bounds
 ------
 * at most ``channels x (1 + MAX_QUEUED_PER_CHANNEL)`` playbacks exist;
 * a playback has at most :data:`MAX_IN_FLIGHT` moves submitted and not yet due, whatever
-  its density, and the player submits at most :data:`MAX_MOVES_PER_TICK` moves per tick
-  (the rest follow at the next tick), so its timetagged commands stay far below the
-  engine's ``schedule_capacity`` and its work per tick is bounded;
+  its density; the player keeps at most :data:`MAX_QUEUED` commands (a quarter of the
+  engine's ``schedule_capacity`` at most) waiting in the engine, cancelled ones included,
+  and submits at most :data:`MAX_MOVES_PER_TICK` per tick (the rest follow at the next
+  tick): a flood of plays cannot fill the engine's schedule, and the work per tick is bounded;
+* a new play submits only its first :data:`START_WINDOW_S` at once;
 * a refused submission (the engine's schedule is full) is retried at the next tick and
   counted (``stats.schedule_full``).
 
 Timing: a clip started without a frame starts one engine block after "now" (so its first
-move is never late); an end (the clip's last frame, or a timetagged stop) is acted on by
-the control thread, which wakes up for it, within about a block of the frame.
+move is never late). The clip layer takes a channel over at the exact frame its first clip
+starts (one ``drive`` without knob values: the engine's layer switch, in stream order).
+The end of a clip (its last frame, or a timetagged stop) is acted on by the control thread,
+which wakes up for it: the channel glides back to the layer below within about a block of
+that frame, holding the clip's last value until then.
+
+Replacing queued moves: the engine drops a layer's waiting moves per channel
+(:meth:`Controller.cancel_scheduled`), including a layer switch still ahead; the player
+then submits again what still applies (the moves it keeps until they are due), and a
+switch still ahead is asked for again.
 """
 
 from __future__ import annotations
 
+import bisect
 import logging
 import threading
 import time
@@ -54,6 +65,7 @@ __all__ = [
     "LOOKAHEAD_S",
     "MAX_IN_FLIGHT",
     "MAX_MOVES_PER_TICK",
+    "MAX_QUEUED",
     "MAX_QUEUED_PER_CHANNEL",
     "LayeredController",
     "PlayerStats",
@@ -73,6 +85,13 @@ TICK_S = 0.01
 MAX_IN_FLIGHT = 256
 #: Moves the player submits in one tick, all playbacks together.
 MAX_MOVES_PER_TICK = 2048
+#: Most clip commands the player keeps waiting in the engine's schedule at once (also those a
+#: replacement cancelled: the engine drops them only when their frame comes), at most a
+#: quarter of ``engine.schedule_capacity``; a flood of plays cannot fill the schedule.
+MAX_QUEUED = 2048
+#: A new play submits its moves this far ahead at once (the control thread does the rest), so
+#: a play that is replaced at once leaves little behind.
+START_WINDOW_S = 0.02
 #: Plays that may wait (timetagged for later) on one channel besides the one playing.
 MAX_QUEUED_PER_CHANNEL = 16
 #: Timeline items (moves and progress markers) one playback may step through per tick.
@@ -185,9 +204,16 @@ class _Playback:
         """The channels this playback drives at ``frame``."""
         return tuple(sorted(c for c, end in self.until.items() if frame >= self.start and (end is None or frame < end)))
 
+    def finish(self, channel: int) -> int | None:
+        """The frame at which it stops driving ``channel``: its own end or its cut (None: never)."""
+        cut, own = self.until.get(channel), self.timeline.end_frame
+        if cut is None:
+            return own
+        return cut if own is None else min(cut, own)
+
     def done_at(self) -> int | None:
         """The frame after which it drives nothing (None: endless)."""
-        ends = [self.timeline.end_frame if end is None else end for end in self.until.values()]
+        ends = [self.finish(c) for c in self.until]
         if not ends or any(e is None for e in ends):
             return None
         return max(e for e in ends if e is not None)
@@ -234,11 +260,17 @@ class ClipPlayer:
         self.start_margin_frames = max(0, int(margin))
         self.clock = clock
         self.stats = PlayerStats()
+        capacity = int(getattr(self.engine, "schedule_capacity", 4 * MAX_QUEUED))
+        self.max_queued = max(1, min(MAX_QUEUED, capacity // 4))
+        self.start_window_frames = max(1, int(START_WINDOW_S * self.fs))
+        self._queued: deque[int] = deque()  # frames of the commands submitted and not yet due
         self._lock = threading.RLock()
         # per channel: playbacks in start order, each driving it until the next one's start
         self._queues: list[list[_Playback]] = [[] for _ in range(controller.channels)]
         self._playbacks: list[_Playback] = []
         self._stops: list[tuple[int, int, float | None]] = []  # (frame, channel, release glide) to act on
+        # per channel: frame of the clip layer's takeover in the engine (None: the layer is released there)
+        self._takeover: list[int | None] = [None] * controller.channels
         self._wake = threading.Event()
         self._halt = threading.Event()
         self._thread: threading.Thread | None = None
@@ -294,10 +326,16 @@ class ClipPlayer:
                         f"(at most {MAX_QUEUED_PER_CHANNEL})"
                     )
             playback = _Playback(timeline, str(getattr(clip, "name", name)), source, _Items(timeline.timed_moves()), {})
-            self._insert(playback, chans, now)
+            self._take_over(tuple(c for c in chans if self._takeover[c] is None), start, source)  # may refuse
             self._playbacks.append(playback)
+            self._insert(playback, chans, now)
             self.stats.plays += 1
-            self._pump(playback, now, MAX_MOVES_PER_TICK)
+            self._pump(
+                playback,
+                now,
+                MAX_MOVES_PER_TICK,
+                horizon=min(start, now + self.lookahead_frames) + self.start_window_frames,
+            )
         self._wake.set()
         return timeline
 
@@ -341,12 +379,15 @@ class ClipPlayer:
             if not stopped:
                 return 0
             self.stats.stops += 1
+            chans = tuple(stopped)
             if frame <= now:
-                self._detach(tuple(stopped), now)
-                self.controller.release(LAYER, channels=tuple(stopped), glide_s=release_s, source=source)
+                self.controller.cancel_scheduled(LAYER, channels=chans)
+                self.controller.release(LAYER, channels=chans, glide_s=release_s, source=source)
+                for c in chans:
+                    self._takeover[c] = None
             else:
-                self._resubmit(tuple(stopped), now)
-                self._stops.extend((frame, c, release_s) for c in stopped)
+                self._reset(chans, now)
+                self._stops.extend((frame, c, release_s) for c in chans)
             self._forget_idle()
         self._wake.set()
         return len(stopped)
@@ -357,8 +398,8 @@ class ClipPlayer:
             now = int(self.engine.frame_position)
             current = None
             for p in self._queues[self._channels([channel])[0]]:
-                end = p.until.get(channel)
-                if p.start <= now and (end is None or now < end) and not p.timeline.position(now).ended:
+                finish = p.finish(channel)
+                if p.start <= now and (finish is None or now < finish):
                     current = p
                 elif p.start > now and current is None:
                     current = p
@@ -436,7 +477,8 @@ class ClipPlayer:
     def _insert(self, playback: _Playback, chans: tuple[int, ...], now: int) -> None:
         """Put ``playback`` on ``chans``: it plays from its start until the next waiting play's start.
 
-        A play with the same start is replaced; the one before is cut at this start.
+        A play with the same start is replaced; the one before is cut at this start, and what
+        was already queued in the engine on those channels is submitted again as it now applies.
         """
         start = playback.start
         touched = []
@@ -459,12 +501,35 @@ class ClipPlayer:
             playback.until[c] = later[0].start if later else None
             self._queues[c] = [*earlier, playback, *later]
         if touched:
-            self._resubmit(tuple(touched), now)
+            self._reset(tuple(touched), now)
         self._forget_idle()
 
-    def _resubmit(self, chans: tuple[int, ...], now: int) -> None:
-        """Drop the clip layer's queued moves on ``chans`` and submit again what still applies there."""
+    def _take_over(self, chans: tuple[int, ...], frame: int, source: str) -> None:
+        """The clip layer takes ``chans`` over at ``frame`` (a drive without knob values: the layer switch)."""
+        if chans:
+            self.controller.drive(LAYER, channels=chans, at_frame=frame, source=source)
+            self._note_queued(frame)
+            for c in chans:
+                self._takeover[c] = frame
+
+    def _reset(self, chans: tuple[int, ...], now: int) -> None:
+        """Drop the clip layer's queued moves on ``chans`` and submit again what still applies there.
+
+        Where the layer's takeover is still ahead in the engine it was dropped too: the layer
+        is released there (it drives nothing yet, so nothing changes) and takes over again at
+        the first start still waiting.
+        """
+        pending = tuple(c for c in chans if (t := self._takeover[c]) is None or t >= now)
+        if pending:
+            self.controller.release(LAYER, channels=pending, source="clip")
         self.controller.cancel_scheduled(LAYER, channels=chans)
+        starts: dict[int, list[int]] = {}
+        for c in pending:
+            self._takeover[c] = None
+            if self._queues[c]:
+                starts.setdefault(min(p.start for p in self._queues[c]), []).append(c)
+        for frame, group in starts.items():
+            self._take_over(tuple(group), frame, "clip")
         for p in self._playbacks:
             for move in p.in_flight:
                 if move.frame < now:
@@ -473,20 +538,17 @@ class ClipPlayer:
                 if targets:
                     self._submit(p, move, targets)
 
-    def _detach(self, chans: tuple[int, ...], now: int) -> None:
-        """The channels stop being driven by any clip now: drop their queued moves, keep the others'."""
-        for c in chans:
-            for p in self._queues[c]:
-                p.until.pop(c, None)
-            self._queues[c] = []
-        self._resubmit(chans, now)
-
-    def _pump(self, playback: _Playback, now: int, budget: int) -> int:
+    def _pump(self, playback: _Playback, now: int, budget: int, horizon: int | None = None) -> int:
         """Submit the playback's moves due before the look-ahead horizon; returns how many were submitted."""
         flight = playback.in_flight
         while flight and flight[0].frame < now:
             flight.popleft()
-        horizon = now + self.lookahead_frames
+        queued = self._queued
+        while queued and queued[0] < now:
+            queued.popleft()
+        budget = min(budget, self.max_queued - len(queued))
+        if horizon is None:
+            horizon = now + self.lookahead_frames
         items = playback.items
         sent = steps = 0
         while (
@@ -524,7 +586,16 @@ class ClipPlayer:
             log.debug("clip %s: %s", playback.name, exc)
             return False
         self.stats.moves += 1
+        self._note_queued(move.frame)
         return True
+
+    def _note_queued(self, frame: int) -> None:
+        """Remember a command waiting in the engine until ``frame`` (kept in frame order)."""
+        queued = self._queued
+        if not queued or frame >= queued[-1]:
+            queued.append(frame)
+        else:
+            queued.insert(bisect.bisect_right(queued, frame), frame)
 
     def _act_on_stops(self, now: int) -> None:
         due = [s for s in self._stops if s[0] <= now]
@@ -537,34 +608,51 @@ class ClipPlayer:
                 by_release.setdefault(release, []).append(c)
         for release, chans in by_release.items():
             self.controller.release(LAYER, channels=tuple(chans), glide_s=release, source="clip stop")
+            for c in chans:
+                self._takeover[c] = None
 
     def _act_on_ends(self, now: int) -> None:
-        """Release channels whose clip played to its end and drop finished playbacks."""
+        """Release channels whose clip played to its end and drop finished playbacks.
+
+        A clip that ends before the next waiting one starts hands the channel back in
+        between; the next one then takes it over again at its start.
+        """
         ended: list[int] = []
         for c, queue in enumerate(self._queues):
             while queue:
                 head = queue[0]
-                end = head.until.get(c)
-                finish = head.timeline.end_frame if end is None else end
+                finish = head.finish(c)
                 if finish is None or now < finish:
                     break
                 queue.pop(0)
-                head.until.pop(c, None)
-                if end is None:  # it played to its own end, and nothing follows
+                cut, own = head.until.pop(c, None), head.timeline.end_frame
+                if own is not None and (cut is None or own < cut):  # it played to its own end
                     ended.append(c)
         if ended:
             self.stats.ended += 1
-            self.controller.release(LAYER, channels=tuple(ended), glide_s=None, source="clip end")
+            chans = tuple(ended)
+            self.controller.release(LAYER, channels=chans, glide_s=None, source="clip end")
+            for c in chans:
+                self._takeover[c] = None
+            waiting = tuple(c for c in chans if self._queues[c])
+            if waiting:
+                self._reset(waiting, now)
         self._forget_idle()
 
     def _forget_idle(self) -> None:
         self._playbacks = [p for p in self._playbacks if p.until]
 
     def _on_panic(self) -> None:
-        """Panic: every clip stops at once (the controller has already silenced the engine)."""
+        """Panic: every clip stops at once (the controller has already silenced the engine and
+        released every layer; moves a tick submitted meanwhile are dropped here)."""
         with self._lock:
+            active = bool(self._playbacks)
             for p in self._playbacks:
                 p.until.clear()
             self._playbacks.clear()
             self._queues = [[] for _ in self._queues]
             self._stops.clear()
+            self._takeover = [None] * len(self._takeover)
+            if active:
+                self.controller.cancel_scheduled(LAYER)
+                self.controller.release(LAYER, channels=None, glide_s=0.0, source="panic")
