@@ -104,7 +104,9 @@ def prepare_clip_render(
             from vibsynth.settings.clips import load_clip_library
 
             library = load_clip_library(config)
-        clip = library.get(clip)
+        resolved: ClipLike = library.get(clip)
+    else:
+        resolved = clip
     gain, rate, loops = check_play_args(gain, rate, loops)
     if loops == 0 and seconds is None:
         raise ParameterError("loops 0 repeats the clip until stopped: give a length (--seconds)")
@@ -116,7 +118,7 @@ def prepare_clip_render(
         engine = build_engine(config, basis=basis)
     fs = float(engine.fs)
     compiled = ClipTimeline(
-        clip,
+        resolved,
         fs=fs,
         start_frame=0,
         gain=gain,

@@ -24,7 +24,12 @@ __all__ = ["ControlServer", "ADAPTER_MODULES", "adapter_modules"]
 
 log = logging.getLogger(__name__)
 
-ADAPTER_MODULES = ("vibsynth.control.spatial.adapter", "vibsynth.control.osc.adapter", "vibsynth.control.midi.adapter")
+ADAPTER_MODULES = (
+    "vibsynth.control.spatial.adapter",
+    "vibsynth.control.clips.adapter",
+    "vibsynth.control.osc.adapter",
+    "vibsynth.control.midi.adapter",
+)
 
 
 class ControlServer(Protocol):

@@ -126,7 +126,7 @@ class LayeredController(Protocol):
         self, layer: str, *, channels: Sequence[int] | None, glide_s: float | None = None, source: str = "api"
     ) -> Any: ...
 
-    def cancel_scheduled(self, layer: str, *, channels: Sequence[int] | None) -> Any: ...
+    def cancel_scheduled(self, layer: str, *, channels: Sequence[int] | None = None) -> Any: ...
 
     def on_panic(self, callback: Callable[[], None]) -> Any: ...
 
@@ -284,7 +284,7 @@ class ClipPlayer:
         channels: Sequence[int] | None = None,
         gain: float = 1.0,
         rate: float = 1.0,
-        loops: int = 1,
+        loops: float = 1,
         at_frame: int | None = None,
         source: str = "api",
     ) -> ClipTimeline:
@@ -570,15 +570,15 @@ class ClipPlayer:
         return sent
 
     def _submit(self, playback: _Playback, move: KnobMove, chans: tuple[int, ...]) -> bool:
-        values = {move.knob: move.value}
         try:
             self.controller.drive(
                 LAYER,
                 channels=chans,
+                intensity=move.value if move.knob == "intensity" else None,
+                balance=move.value if move.knob == "balance" else None,
                 at_frame=move.frame,
                 glide_s=move.glide_s,
                 source=playback.source,
-                **values,  # type: ignore[arg-type]  # intensity= or balance=
             )
         except EngineBusyError as exc:  # ScheduleFullError included
             self.stats.schedule_full += 1

@@ -4,15 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from vibsynth.control.clips.player import ClipPlayer
+from vibsynth.control.clips import player_of
 
-__all__ = ["player_of", "clip_values", "clip_status"]
-
-
-def player_of(controller: Any) -> ClipPlayer | None:
-    """The clip player attached to a controller (``controller.clips``, set by the service), or None."""
-    player = getattr(controller, "clips", None)
-    return player if isinstance(player, ClipPlayer) else None
+__all__ = ["clip_values", "clip_status"]
 
 
 def clip_values(controller: Any, channel: int) -> tuple[str, float, int]:

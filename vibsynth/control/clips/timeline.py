@@ -53,11 +53,11 @@ import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import Protocol
 
 from vibsynth.control.controller import check_range
 from vibsynth.engine.commands import KnobName
 from vibsynth.errors import ParameterError
+from vibsynth.settings.clips import Clip, Keyframe
 
 __all__ = [
     "GAIN_MAX",
@@ -94,39 +94,8 @@ _SAME = 1e-9
 _KNOBS: tuple[KnobName, KnobName] = ("intensity", "balance")
 
 
-class _KeyframeLike(Protocol):
-    t_ms: float
-    intensity: float
-    balance: float
-    interp: str
-
-
-class _TransientLike(Protocol):
-    t_ms: float
-    intensity: float
-    balance: float
-    decay_ms: float
-
-
-class ClipLike(Protocol):
-    """What the compiler reads of a clip (:class:`vibsynth.settings.clips.Clip`)."""
-
-    @property
-    def name(self) -> str: ...
-
-    @property
-    def duration_ms(self) -> float: ...
-
-    @property
-    def keyframes(self) -> Sequence[_KeyframeLike]: ...
-
-    @property
-    def transients(self) -> Sequence[_TransientLike]: ...
-
-    @property
-    def loop(self) -> tuple[float, float] | None: ...
-
-    def value_at(self, t_ms: float) -> tuple[float, float]: ...
+#: What the compiler reads: a clip of the clip model.
+ClipLike = Clip
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,7 +181,7 @@ def check_play_args(gain: float, rate: float, loops: float) -> tuple[float, floa
 
 
 # --------------------------------------------------------------------------- clip curves
-def _smooth_points(clip: ClipLike, a: _KeyframeLike, b: _KeyframeLike) -> list[tuple[float, float, float]]:
+def _smooth_points(clip: ClipLike, a: Keyframe, b: Keyframe) -> list[tuple[float, float, float]]:
     """Breakpoints ``(t, intensity, balance)`` of a smooth segment, ``a`` and ``b`` included."""
     out = [(a.t_ms, a.intensity, a.balance)]
     stack = [(a.t_ms, (a.intensity, a.balance), b.t_ms, (b.intensity, b.balance))]
@@ -464,7 +433,7 @@ class ClipTimeline:
         start_frame: int = 0,
         gain: float = 1.0,
         rate: float = 1.0,
-        loops: int = 1,
+        loops: float = 1,
         balance_limits: tuple[float, float] = (-math.inf, math.inf),
         glide_max_s: float = 10.0,
     ) -> None:

@@ -7,21 +7,22 @@ Addresses (docs/clips.md, "Triggering from OSC")::
     /vibsynth/ch/{n}/get   s "clip"   ->  /vibsynth/ch/{n}/clip s name f position_ms i loops_left
 
 A bundle with a future timetag starts (or stops) the clip at that exact frame. The player is
-the controller's ``clips`` attribute (:class:`~vibsynth.control.clips.player.ClipPlayer`,
-attached by the service); without one, play and stop get an error reply.
+the controller's running :class:`~vibsynth.control.clips.player.ClipPlayer`
+(:func:`vibsynth.control.clips.player_of`); without one, play and stop get an error reply.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from vibsynth.control.clips import player_of
 from vibsynth.control.clips.player import ClipPlayer
-from vibsynth.control.clips.status import clip_values, player_of
+from vibsynth.control.clips.status import clip_values
 from vibsynth.control.controller import check_range
 from vibsynth.control.osc.codec import Message, encode_message
 from vibsynth.control.osc.handler import _arg_count, _number, _string
 from vibsynth.control.osc.workers import PeerLike
-from vibsynth.errors import ParameterError, VibsynthError
+from vibsynth.errors import ClipError, ParameterError, VibsynthError
 
 if TYPE_CHECKING:
     from vibsynth.control.osc.handler import OscHandler
@@ -55,15 +56,19 @@ class ClipMethods:
         loops = _number(msg, 3, "loops") if len(msg.args) > 3 else 1.0
         if len(name) > 128:
             raise ParameterError(f"clip name longer than 128 characters ({len(name)})")
-        self._player().play(
-            name,
-            channels=channels,
-            gain=gain,
-            rate=rate,
-            loops=loops,
-            at_frame=at_frame,
-            source=SOURCE,  # type: ignore[arg-type]
-        )
+        player = self._player()
+        try:
+            player.play(
+                name,
+                channels=channels,
+                gain=gain,
+                rate=rate,
+                loops=loops,
+                at_frame=at_frame,
+                source=SOURCE,
+            )
+        except ClipError as exc:  # unknown clip (with "did you mean"), or a broken clip file
+            self.handler._error(peer, msg.address, str(exc), "osc.clip")
 
     def on_stop(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
         _arg_count(msg, (0, 1), "optional release in ms")
