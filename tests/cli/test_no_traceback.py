@@ -100,6 +100,16 @@ def _cases():
         ("clip import {dir}/nan.ahap --from wav", USAGE),
         ("clip export nosuchclip -o {dir}/o.ahap", USAGE),
         ("clip export heartbeat --format wav", USAGE),
+        ("clip play impakt --port 1 --timeout 0.2 --gain nan", USAGE),
+        ("clip play impact --rate 0", USAGE),
+        ("clip play impact --loops 10001", USAGE),
+        ("clip play impact --at 11", USAGE),
+        ("clip play impact --channel 0", USAGE),
+        ("clip stop --release -1", USAGE),
+        ("render --clip impakt -o {dir}/o.wav", USAGE),
+        ("render --clip rain --loops 0 -o {dir}/o.wav", USAGE),
+        ("render --clip impact --gain 5 -o {dir}/o.wav", USAGE),
+        ("render --balance 0 --intensity 0.5 --loops 2 -o {dir}/o.wav", USAGE),
         ("lab plan dissimilarity --stimuli renders:1", USAGE),
         ("lab plan dissimilarity --stimuli renders --seed -1", USAGE),
         ("lab plan dissimilarity --stimuli renders --seed 18446744073709551616", USAGE),
@@ -139,6 +149,9 @@ def _cases():
         ("clip validate {dir}/bomb.yaml", RUNTIME),
         ("clip validate {dir}/binary.yaml", RUNTIME),
         ("clip export heartbeat -o {dir}/good.wav/x.ahap", RUNTIME),
+        ("clip play impact --port 1 --timeout 0.2", RUNTIME),  # no server there
+        ("clip stop --port 1 --timeout 0.2", RUNTIME),
+        ("render --clip impact -o {dir}/missing-dir/o.wav", RUNTIME),
         ("lab plan dissimilarity --stimuli {dir}/folder", RUNTIME),  # no WAVs
         ("lab plan dissimilarity --stimuli {dir}", RUNTIME),  # broken WAVs
         ("lab plan dissimilarity --stimuli presets:nope", RUNTIME),

@@ -22,6 +22,14 @@ from vibsynth.errors import NoReplyError, ParameterError
 
 __all__ = ["add_clip_play_arguments", "add_clip_play_parsers"]
 
+PLAY_HELP = """\
+Play a haptic clip on a running server (vibsynth serve): sends /vibsynth/play (or
+/vibsynth/ch/N/play with --channel) and waits until the server has handled it. An unknown
+clip or a refused value prints the server's error and exits 1, as does a server that does
+not answer; a bad argument exits 2. --at S starts it S seconds from now, at that exact
+sample (a timetagged bundle). See docs/clips.md.
+"""
+
 #: How long ``--at`` may look ahead (the server's default schedule horizon).
 MAX_AT_S = 10.0
 
@@ -57,7 +65,8 @@ def add_clip_play_parsers(sub: Any) -> None:
     p = sub.add_parser(
         "play",
         help="play a clip on a running server (vibsynth serve)",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+        description=PLAY_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("name", metavar="NAME", help="clip name (vibsynth clip list)")
     p.add_argument(

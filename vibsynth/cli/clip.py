@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from vibsynth.cli._clip_play import add_clip_play_parsers
 from vibsynth.cli._common import file_name_argument
 from vibsynth.cli._table import Column, add_format_argument, emit, output_format
 from vibsynth.errors import ClipError, ParameterError
@@ -213,7 +214,7 @@ def register(subparsers: Any) -> None:
     """Add ``vibsynth clip ...``."""
     parser = subparsers.add_parser(
         "clip",
-        help="haptic clips: list, show, validate, import from AHAP / Meta .haptic, export to AHAP",
+        help="haptic clips: list, show, validate, import from AHAP / Meta .haptic, export to AHAP, play",
         description="Haptic clips: timelines of the two knobs in YAML files (docs/clips.md). "
         "User clips override shipped ones of the same name.",
     )
@@ -259,3 +260,5 @@ def register(subparsers: Any) -> None:
 
     p = sub.add_parser("schema", help="print the JSON Schema of a clip file (editor completion)")
     p.set_defaults(func=cmd_schema)
+
+    add_clip_play_parsers(sub)  # play, stop: a running server plays it (cli/_clip_play.py)
