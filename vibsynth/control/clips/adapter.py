@@ -46,7 +46,7 @@ class ClipService:
         self.prefix = prefix.rstrip("/")
         self.library = library
         self.player = ClipPlayer(controller, library.get)
-        self.watcher = ClipWatcher(library, self._changed) if watch else None
+        self.watcher = ClipWatcher(library, self._changed, interval_s=0.5) if watch else None
 
     def _changed(self, name: str) -> None:
         log.info("clip %r changed; its next play uses the new version", name)
