@@ -8,7 +8,6 @@ preset is asked for by name, an error with the same text.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import logging
 import math
@@ -25,7 +24,7 @@ from vibsynth.settings.cli_args import flag_type
 from vibsynth.settings.config import Config, add_config_arguments, config_from_args
 from vibsynth.settings.library import PresetLibrary, UnknownPresetError, load_library
 from vibsynth.settings.models import PresetModel
-from vibsynth.settings.presets import BALANCE_LIMIT, Preset, preset_to_yaml
+from vibsynth.settings.presets import Preset, preset_to_yaml
 
 __all__ = ["ORDER", "register"]
 
@@ -167,17 +166,11 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def cmd_rm(args: argparse.Namespace) -> int:
     """Delete a user preset's file (shipped presets are read-only); a broken file can be removed too."""
     _, library = _library(args)
-    user_dir = library.user_dir
-    candidates = [] if user_dir is None else [user_dir / f"{args.name}.yaml"]
-    target = next((c for c in candidates if c.is_file()), None)
-    if target is None:
-        if args.name in library and library.get(args.name).origin == "shipped":
-            raise ParameterError(f"{args.name!r} is a shipped preset: shipped presets are read-only")
-        _get(library, args.name)  # unknown: the usage error with "did you mean"
-        raise ParameterError(f"{args.name!r} has no file in the user folder {user_dir}")
-    target.unlink()
-    overridden = library.shipped_dir is not None and (library.shipped_dir / f"{args.name}.yaml").is_file()
-    print(f"removed {target}" + ("; the shipped preset of that name is used again" if overridden else ""))
+    try:
+        target, shipped_again = library.remove_user(args.name)
+    except UnknownPresetError as exc:  # shipped, no user file, unknown: the command line asked for it
+        raise ParameterError(str(exc)) from None
+    print(f"removed {target}" + ("; the shipped preset of that name is used again" if shipped_again else ""))
     return 0
 
 
@@ -243,57 +236,30 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
         )
     except ParameterError as exc:
         raise PresetError(f"{recording.path}: {exc}") from None
-    intensity = min(1.0, max(0.0, result.intensity_knob))
-    if intensity != result.intensity_knob:
-        print(
-            f"vibsynth: warning: {recording.path}: level {result.level_db:.1f} dB maps to intensity "
-            f"{result.intensity_knob:.3f}, outside [0, 1] with knobs.ceiling_db = {knobs['ceiling_db']:g} and "
-            f"range_db = {knobs['range_db']:g}; clamped to {intensity:g}",
-            file=sys.stderr,
+    from vibsynth.settings.from_recording import preset_from_analysis, recording_digest
+
+    try:
+        made = preset_from_analysis(
+            result,
+            name=args.name or recording.path.stem,
+            recording=recording.path.name,
+            digest=recording_digest(recording.path.read_bytes()),
+            basis_id=basis.id,
+            ceiling_db=knobs["ceiling_db"],
+            range_db=knobs["range_db"],
+            created_by="preset from-recording",
+            description=args.description,
+            glide_ms=args.glide_ms,
+            program=args.program,
+            tags=args.tags or (),
         )
-    balance = result.balance
-    if abs(balance) > BALANCE_LIMIT:
-        clamped = math.copysign(BALANCE_LIMIT, balance)
-        print(
-            f"vibsynth: warning: {recording.path}: balance {balance:+.3f} is beyond the preset limit "
-            f"+-{BALANCE_LIMIT:g}; clamped to {clamped:+g}",
-            file=sys.stderr,
-        )
-        balance = clamped
-    if result.outside_database:
-        print(
-            f"vibsynth: note: {recording.path}: t1 = {result.t1:.2f} lies outside the basis' database "
-            "(represented, not clamped)",
-            file=sys.stderr,
-        )
-    digest = hashlib.sha256(recording.path.read_bytes()).hexdigest()[:16]
-    provenance = {
-        "recording": recording.path.name,
-        "recording_sha256": digest,
-        "fs_hz": float(recording.fs),
-        "duration_s": round(result.duration_s, 4),
-        "level_db_80_200hz": round(result.level_db, 3),
-        "intensity_mapping": {"ceiling_db": float(knobs["ceiling_db"]), "range_db": float(knobs["range_db"])},
-        "intensity_knob_unclamped": round(result.intensity_knob, 4),
-        "t1": round(result.t1, 4),
-        "balance": round(result.balance, 4),
-        "scores": [round(float(s), 4) for s in result.scores],
-        "non_stationarity_db": round(result.non_stationarity_db, 3),
-        "outside_database": bool(result.outside_database),
-        "basis_id": basis.id,
-        "created_by": f"vibsynth {__version__} (preset from-recording)",
-    }
-    name = args.name or recording.path.stem
-    preset = _typed_preset(
-        name=name,
-        intensity=round(intensity, 4),
-        balance=round(balance, 4),
-        description=args.description or f"From the recording {recording.path.name}.",
-        glide_ms=args.glide_ms,
-        program=args.program,
-        tags=tuple(args.tags or ()),
-        provenance=provenance,
-    )
+    except PresetError as exc:  # a value typed on the command line
+        raise ParameterError(str(exc)) from None
+    for line in made.warnings:
+        print(f"vibsynth: warning: {recording.path}: {line}", file=sys.stderr)
+    for line in made.notes:
+        print(f"vibsynth: note: {recording.path}: {line}", file=sys.stderr)
+    preset = made.preset
     path = _write_new(library, preset, args.output, args.force)
     print(
         f"wrote {path}: intensity {preset.intensity:.3f}, balance {preset.balance:+.3f} "

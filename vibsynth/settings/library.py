@@ -447,6 +447,38 @@ class FileLibrary(Generic[T]):
             raise self.kind.error(f"no user {noun} folder configured ({self.kind.section}.user_dir)")
         return self.user_dir / f"{name}{self.kind.suffix}"
 
+    def remove_user(self, name: str) -> tuple[Path, bool]:
+        """Delete a user file (shipped ones are read-only; a broken file can be removed) and reload.
+
+        Returns
+        -------
+        path : pathlib.Path
+            The file removed.
+        shipped_again : bool
+            A shipped item of that name is used again.
+
+        Raises
+        ------
+        VibsynthError
+            ``kind.error`` for a name that is not a plain file name or a file that cannot be
+            removed; ``kind.unknown`` for a shipped item, a name without a user file, or an
+            unknown name (with "did you mean").
+        """
+        noun, suffix = self.kind.noun, self.kind.suffix
+        target = self.user_path(name)
+        if not target.is_file():
+            if name in self and self.get(name).origin == "shipped":
+                raise self.kind.unknown(f"{name!r} is a shipped {noun}: shipped {noun}s are read-only")
+            self.get(name)  # unknown: "did you mean"
+            raise self.kind.unknown(f"{name!r} has no file in the user folder {self.user_dir}")
+        try:
+            target.unlink()
+        except OSError as exc:
+            raise self.kind.error(f"{target}: cannot remove it ({exc.strerror or exc})") from None
+        self.reload()
+        shipped = self.shipped_dir is not None and (self.shipped_dir / f"{name}{suffix}").is_file()
+        return target, shipped
+
     def save_user(self, item: T, *, overwrite: bool = False) -> Path:
         """Write an item into the user folder (atomically) and reload."""
         path = self.user_path(item.name)

@@ -62,6 +62,7 @@ __all__ = [
     "load_preset",
     "migrate",
     "parse_preset",
+    "preset_from_data",
     "preset_to_yaml",
     "save_preset",
 ]
@@ -230,6 +231,28 @@ def parse_preset(text: str, origin: str = "<preset>", *, name: str | None = None
         Syntax error, duplicate or unknown key, wrong type, out-of-range value, newer version.
     """
     return _from_document(parse_yaml(text, origin, error=PresetError, what=WHAT), name)
+
+
+def preset_from_data(data: Any, origin: str, *, name: str | None = None) -> Preset:
+    """Validate plain data (a form, a request body) exactly as a preset file's content is validated.
+
+    Parameters
+    ----------
+    data : Any
+        What a preset file would hold (a mapping of preset keys).
+    origin : str
+        Named in messages instead of ``file:line``.
+    name : str, optional
+        Expected name (the ``name`` key may be omitted, and must match if given).
+
+    Raises
+    ------
+    InvalidPresetError
+        ``.problems`` lists every problem, each with its key (for errors beside form fields).
+    PresetError
+        Not a mapping, a newer version, a missing name.
+    """
+    return _validate(data, YamlDocument(data, {}, origin), name)
 
 
 def _from_document(doc: YamlDocument, name: str | None) -> Preset:

@@ -39,6 +39,7 @@ export function mountKnobs(studio) {
   let catchUp = null;
 
   const current = () => channels[Number(select.value) - 1];
+  studio.currentKnobs = () => current(); // the channel shown: {channel, intensity, balance, ...}
   const held = (name) => dragging === name || dragging === "xy" && name !== "glide" || performance.now() < heldUntil[name];
 
   function hold(...names) {
