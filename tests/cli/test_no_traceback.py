@@ -33,6 +33,7 @@ def files(tmp_path_factory, basis):
     write_wav(good, x, 8000.0)
     (d / "junk.wav").write_bytes(np.random.default_rng(1).integers(0, 256, 4096, dtype=np.uint8).tobytes())
     (d / "empty.wav").write_bytes(b"")
+    (d / "no-fmt.wav").write_bytes(b"RIFF\x00\x00\x00\x00WAVEjunk" + bytes(64))  # scipy: UnboundLocalError
     (d / "folder").mkdir()
     header = b"RIFF" + struct.pack("<I", 36) + b"WAVEfmt " + struct.pack("<IHHIIHH", 16, 1, 0, 8000, 0, 0, 16)
     (d / "zero-channels.wav").write_bytes(header + b"data" + struct.pack("<I", 0))
@@ -137,6 +138,7 @@ def _cases():
         ("config check {dir}/bomb.yaml", RUNTIME),
         ("config check {dir}/binary.yaml", RUNTIME),
         ("preset from-recording {dir}/junk.wav --name x", RUNTIME),
+        ("analyze {dir}/no-fmt.wav", RUNTIME),
         ("serve --config {dir}/bomb.yaml --seconds 0.1", RUNTIME),
         ("serve --output wav -o {dir}/missing-dir/x.wav --seconds 0.1", RUNTIME),
         ("clip import {dir}/truncated.ahap", RUNTIME),

@@ -65,6 +65,8 @@ _MAX_HEADER_CHUNKS = 64
 def _wav_layout(path: Path) -> tuple[int, int, int] | None:
     """(channels, block_align, bits per sample) from a WAV's ``fmt `` chunk; None when not found.
 
+    Raises :class:`~vibsynth.errors.InputError` when the file cannot be read.
+
     Only what :func:`_read_wav` checks before handing the file to scipy, which reads
     everything else (and refuses what it cannot read).
     """
@@ -88,8 +90,8 @@ def _wav_layout(path: Path) -> tuple[int, int, int] | None:
                     _tag, channels, _fs, _rate, block_align, bits = struct.unpack(order + "HHIIHH", fmt)
                     return int(channels), int(block_align), int(bits)
                 handle.seek(size + (size & 1), 1)
-    except OSError:
-        return None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
     return None
 
 
@@ -97,15 +99,16 @@ def _read_wav(path: Path, channel: int) -> tuple[NDArray[np.float64], float]:
     from scipy.io import wavfile
 
     layout = _wav_layout(path)
-    if layout is not None:
-        channels, block_align, bits = layout
-        if channels == 0:
-            raise InputError(f"{path}: not a readable WAV file (its header says 0 channels)")
-        if bits == 0 or block_align < channels:
-            raise InputError(
-                f"{path}: not a readable WAV file (its header says {bits} bits per sample, "
-                f"{block_align} bytes per frame for {channels} channels)"
-            )
+    if layout is None:  # no RIFF/WAVE header or no fmt chunk: scipy would fail in its own ways
+        raise InputError(f"{path}: not a readable WAV file (no RIFF/WAVE header with a 'fmt ' chunk)")
+    channels, block_align, bits = layout
+    if channels == 0:
+        raise InputError(f"{path}: not a readable WAV file (its header says 0 channels)")
+    if bits == 0 or block_align < channels:
+        raise InputError(
+            f"{path}: not a readable WAV file (its header says {bits} bits per sample, "
+            f"{block_align} bytes per frame for {channels} channels)"
+        )
     try:
         with warnings.catch_warnings():  # unknown chunks (e.g. LIST metadata) are harmless
             warnings.simplefilter("ignore", wavfile.WavFileWarning)

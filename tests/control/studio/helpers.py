@@ -100,3 +100,37 @@ def raw_request(port: int, head: bytes, timeout: float = 10.0) -> bytes:
                 if len(data) >= head_end + length:
                     break
         return b"".join(chunks)
+
+
+def texture_recording(path: Any, psd_file: Any, label: str, *, seconds: float = 3.0, seed: int = 0) -> dict[str, Any]:
+    """A WAV (16-bit PCM, 10 kHz) of noise with the spectrum of a HaTT texture model from ../shared.
+
+    The Penn Haptic Texture Toolkit's models are what the dataset holds (no recordings are
+    public): the signal is Gaussian noise shaped by the texture's PSD, as the models render.
+
+    Returns
+    -------
+    expected : dict
+        ``balance`` of the model's spectrum (from its band powers, no signal involved), the
+        texture ``label``, the row used, and the ``path``.
+    """
+    import numpy as np
+
+    from vibsynth.dsp.basis import band_powers_from_psd, to_db
+    from vibsynth.formats.basis_file import default_basis
+    from vibsynth.formats.psd import read_psd_table
+    from vibsynth.formats.recordings import write_wav
+
+    table = read_psd_table(psd_file)
+    row = next(i for i, name in enumerate(table.labels) if name == label)
+    fs, n = 10_000.0, int(seconds * 10_000)
+    freqs = np.fft.rfftfreq(n, 1.0 / fs)
+    log_psd = np.interp(np.log(np.maximum(freqs, 1e-9)), np.log(table.freqs_hz), np.log(table.psd[row]))
+    rng = np.random.default_rng(seed)
+    spectrum = np.fft.rfft(rng.standard_normal(n)) * np.sqrt(np.exp(log_psd))
+    signal = np.fft.irfft(spectrum, n)
+    signal *= 0.5 / np.max(np.abs(signal))
+    write_wav(path, signal, fs, sample_format="pcm16")
+    basis = default_basis()
+    t1 = basis.scores(to_db(band_powers_from_psd(table.freqs_hz, table.psd[row])))[0]
+    return {"label": label, "row": row, "balance": float(basis.balance_from_t1(t1)), "path": path}

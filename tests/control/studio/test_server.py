@@ -34,7 +34,7 @@ def test_state_describes_channels_limits_and_knobs(studio, controller):
     assert state["extensions"] == []
 
 
-def test_page_moves_reach_the_controller_and_are_acknowledged(studio, controller):
+def test_page_moves_reach_the_controller_and_are_acknowledged(studio, controller, library):
     async def scenario():
         async with aiohttp.ClientSession() as session:
             ws = await connect(session, studio)
@@ -48,14 +48,15 @@ def test_page_moves_reach_the_controller_and_are_acknowledged(studio, controller
             await receive_until(ws, is_type("ack", id=8))
             await ws.send_json({"type": "mute", "channel": 2, "value": True, "id": 9})
             await receive_until(ws, is_type("ack", id=9))
-            await ws.send_json({"type": "preset", "channel": 1, "name": "silk", "id": 10})
+            await ws.send_json({"type": "preset", "channel": 1, "name": "brick", "id": 10})
             await receive_until(ws, is_type("ack", id=10))
             await ws.close()
 
     run(scenario())
     one, two = controller.state()
+    brick = library.get("brick")
     assert two.intensity == 0.42 and two.muted
-    assert (one.intensity, one.balance, one.preset) == (0.3, -1.0, "silk")  # the preset came last
+    assert (one.intensity, one.balance, one.preset) == (brick.intensity, brick.balance, "brick")  # it came last
     assert one.glide_s == two.glide_s == 0.25
     knob = [c for c in controller.engine.commands if isinstance(c, SetKnob) and c.value == 0.42]
     assert knob and knob[0].channels == (1,)

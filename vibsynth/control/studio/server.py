@@ -23,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import errno
 import logging
+import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -176,7 +177,7 @@ class StudioServer:
             exc = self._start_error
             if isinstance(exc, VibsynthError):
                 raise exc
-            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            reason = os.strerror(exc.errno) if isinstance(exc, OSError) and exc.errno else str(exc)
             raise ConfigError(
                 f"studio: cannot listen on {self.host}:{self.requested_port}: {reason} "
                 "(set studio.port or --studio-port, or --no-studio)"
@@ -251,7 +252,7 @@ class StudioServer:
     def make_app(self) -> web.Application:
         """The aiohttp application: middlewares, the studio's routes, then the extensions'."""
         self.gate = Gate(self.token, port=self.requested_port, bind_host=self.host, upload_paths=UPLOAD_PATHS)
-        app = web.Application(middlewares=[self.gate.middleware], client_max_size=BODY_CAP)
+        app = web.Application(middlewares=[self.gate.middleware, _unexpected], client_max_size=BODY_CAP)
         app.router.add_get("/", self._index)
         app.router.add_get("/static/{path:.+}", self._static_file)
         app.router.add_get("/ws", self._websocket)
@@ -347,12 +348,6 @@ class StudioServer:
             ("knob", event.channel, name),
             {"type": "knob", "channel": event.channel + 1, "name": name, "value": value, "source": event.source},
         )
-        driver = getattr(self.controller, "driver", None)
-        if callable(driver):
-            hub.post(
-                ("knob", event.channel, "driver"),
-                {"type": "knob", "channel": event.channel + 1, "name": "driver", "value": driver(event.channel)},
-            )
 
     def publish(self, extension: str, key: str, data: Any) -> None:
         """Push extension data to every page (any thread; the newest per (extension, key) is sent)."""
@@ -411,6 +406,20 @@ class StudioServer:
                 callback(count)
             except Exception:  # noqa: BLE001 - a panel's bug must not break the socket
                 log.exception("studio: page count callback failed")
+
+
+@web.middleware
+async def _unexpected(request: web.Request, handler: Callable[[web.Request], Any]) -> web.StreamResponse:
+    """A bug in a handler answers one line (500) and is logged with its traceback, never an HTML page."""
+    try:
+        response: web.StreamResponse = await handler(request)
+        return response
+    except web.HTTPException:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the last line of defence of every route
+        log.exception("studio: %s %s failed", request.method, request.path)
+        message = f"unexpected {type(exc).__name__}: {exc} (a bug: please report it; the log has the details)"
+        return web.json_response({"message": message}, status=500)
 
 
 class _Session:

@@ -36,6 +36,7 @@ from vibsynth.dsp.basis import Basis, to_db
 from vibsynth.dsp.filterbank import band_powers
 from vibsynth.dsp.intensity import INTENSITY_BAND_HZ, SILENCE_DB, knob_to_level_db
 from vibsynth.dsp.synthesis import SpectralShaper
+from vibsynth.engine.engine import TAP_MAX_FRAMES
 from vibsynth.errors import ParameterError
 
 __all__ = ["MEASURE_PERIOD_S", "SpectrumModel", "SpectrumPanel"]
@@ -46,9 +47,13 @@ log = logging.getLogger(__name__)
 MEASURE_PERIOD_S = 0.25
 #: A knob change recomputes the target at most this often.
 TARGET_MIN_PERIOD_S = 0.03
-#: Output analysed: this long (capped by the output tap's 65536 frames).
+#: Output analysed per measurement: this long, capped by the output tap (32768 frames: 0.68 s at 48 kHz).
 MEASURE_SECONDS = 1.0
-MAX_TAP_FRAMES = 65536
+#: Shortest output analysed: 3 periods of the lowest band.
+MIN_MEASURE_SECONDS = 0.3
+#: Measurements averaged (band powers, running mean over the last ~this many while the knobs stay):
+#: one window of 0.68 s holds about one period's worth of the narrow low bands, far too noisy alone.
+AVERAGE_OVER = 8
 #: Balances are cached to this step (knob units): finer than any slider moves.
 BALANCE_STEP = 1e-3
 #: Cached target shapes.
@@ -127,14 +132,18 @@ class SpectrumModel:
 
     def measured_db(self, samples: NDArray[np.floating[Any]]) -> NDArray[np.float64] | None:
         """Band levels (dB), shape (n_bands,), of output samples, shape (frames,); None when too short."""
+        powers = self.measured_powers(samples)
+        return None if powers is None else to_db(powers)
+
+    def measured_powers(self, samples: NDArray[np.floating[Any]]) -> NDArray[np.float64] | None:
+        """Band powers, shape (n_bands,), of output samples, shape (frames,); None when too short."""
         x = np.asarray(samples, dtype=np.float64)
-        if x.size < int(0.5 * self.fs):  # 5 periods of the lowest band (as vibsynth analyze asks)
+        if x.size < int(MIN_MEASURE_SECONDS * self.fs):
             return None
         try:
-            powers = band_powers(x, fs=self.fs, centres=self.basis.centres_hz, order=self.basis.filter_order)
+            return band_powers(x, fs=self.fs, centres=self.basis.centres_hz, order=self.basis.filter_order)
         except ParameterError:
             return None
-        return to_db(powers)
 
     def y_range_db(self) -> tuple[float, float]:
         """A fixed dB axis covering every intensity: from 40 dB below the quietest level to 25 dB above the ceiling."""
@@ -160,6 +169,7 @@ class SpectrumPanel:
         self._thread: threading.Thread | None = None
         self._watched: frozenset[int] = frozenset()
         self._last_knobs: dict[int, tuple[float, float]] = {}
+        self._averages: dict[int, tuple[tuple[float, float, bool], int, NDArray[np.float64]]] = {}
         self._last_measure = 0.0
         self.computed = 0
         server.on_pages_changed(self._pages_changed)
@@ -206,11 +216,12 @@ class SpectrumPanel:
         }
 
     def _measure(self, channel: int) -> NDArray[np.float64] | None:
+        """Band levels (dB) of the channel's newest output, averaged while its knobs stay where they are."""
         engine = self.server.controller.engine
         read = getattr(engine, "read_output", None)
         if not callable(read):
             return None
-        frames = min(MAX_TAP_FRAMES, int(round(self.model.fs * MEASURE_SECONDS)))
+        frames = min(TAP_MAX_FRAMES, int(round(self.model.fs * MEASURE_SECONDS)))
         try:
             block = np.asarray(read(frames))
         except Exception as exc:  # noqa: BLE001 - a failing tap leaves the measured curve empty
@@ -218,7 +229,19 @@ class SpectrumPanel:
             return None
         if block.ndim != 2 or not 0 <= channel < block.shape[1]:
             return None
-        return self.model.measured_db(block[:, channel])
+        powers = self.model.measured_powers(block[:, channel])
+        if powers is None:
+            return None
+        state = self.server.controller.state()[channel]
+        knobs = (float(state.intensity), float(state.balance), bool(state.muted))
+        previous = self._averages.get(channel)
+        if previous is None or previous[0] != knobs:
+            count, mean = 1, powers
+        else:
+            count = min(previous[1] + 1, AVERAGE_OVER)
+            mean = previous[2] + (powers - previous[2]) / count
+        self._averages[channel] = (knobs, count, mean)
+        return to_db(mean)
 
     # ------------------------------------------------------------------ the worker
     def _pages_changed(self, pages: int) -> None:
