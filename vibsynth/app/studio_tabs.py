@@ -19,7 +19,7 @@ __all__ = ["STUDIO_EXTENSION_MODULES", "studio_extensions"]
 log = logging.getLogger(__name__)
 
 #: Modules providing ``studio_extension(config, controller, library)``, in tab order.
-STUDIO_EXTENSION_MODULES: tuple[str, ...] = ("vibsynth.app.clips.studio",)
+STUDIO_EXTENSION_MODULES: tuple[str, ...] = ("vibsynth.app.lab.studio", "vibsynth.app.clips.studio")
 
 
 def studio_extensions(

@@ -145,7 +145,7 @@ def intensity_plan(
     mid, quarter = (lo + hi) / 2, (hi - lo) / 4
     starts = np.exp(rng.uniform(mid - quarter, mid + quarter, order.size))
     test = tuple(
-        Trial(k + 1, "test", (names[i],), start_gain=round(float(g), 6)) for k, (i, g) in enumerate(zip(order, starts))
+        Trial(k + 1, "test", (names[i],), start_gain=float(f"{g:.6g}")) for k, (i, g) in enumerate(zip(order, starts))
     )
     return Plan("intensity", seed, (), test)
 

@@ -95,6 +95,8 @@ class SessionInfo:
         ISO timestamp (UTC).
     set_name : str
         The stimulus set.
+    set_kind : str
+        ``folder``, ``presets`` or ``renders``.
     done, total : int
         Data trials answered, and planned.
     """
@@ -105,6 +107,7 @@ class SessionInfo:
     seed: int
     created: str
     set_name: str
+    set_kind: str
     done: int
     total: int
 
@@ -122,6 +125,7 @@ class SessionInfo:
             "seed": self.seed,
             "created": self.created,
             "set": self.set_name,
+            "set_kind": self.set_kind,
             "done": self.done,
             "total": self.total,
             "complete": self.complete,
@@ -256,6 +260,7 @@ class Session:
             seed=self.seed,
             created=str(self.meta["created"]),
             set_name=str(self.meta["set"]["name"]),
+            set_kind=str(self.meta["set"].get("kind", "")),
             done=self.done,
             total=self.total,
         )
