@@ -116,3 +116,13 @@ def test_analyze_intensity_and_resynthesis(root, capsys, tmp_path):
     out = run(capsys, "lab", "equalise", intensity, "-o", tmp_path / "eq")
     assert "6 stimuli equalised by 1 participant(s)" in out
     assert json.loads((tmp_path / "eq" / "set.json").read_text())["equalised"] is True
+
+
+def test_lab_alone_serves_and_opens_the_lab_tab(monkeypatch):
+    from vibsynth.cli import serve
+
+    seen = {}
+    monkeypatch.setattr(serve, "run", lambda args: seen.update(vars(args)) or 0)
+    assert main(["lab", "--output", "null", "--seconds", "1", "--channels", "2"]) == 0
+    assert seen["open_browser"] is True and seen["open_fragment"] == "#lab"
+    assert seen["output"] == "null" and seen["channels"] == 2

@@ -116,6 +116,7 @@ def _cases():
         ("lab plan dissimilarity --stimuli renders --seed 18446744073709551616", USAGE),
         ("lab plan abx --stimuli renders", USAGE),
         ("lab sessions --format xml", USAGE),
+        ("lab --no-studio --output null --seconds 0.1", USAGE),
         # a file is missing, unreadable or malformed, or cannot be written
         ("analyze {dir}/missing.wav", RUNTIME),
         ("analyze {dir}/junk.wav", RUNTIME),

@@ -218,7 +218,8 @@ def _announce_studio(studio: Any, args: Any, out: Any) -> None:
 
     print(f"studio: {studio.url}", file=out, flush=True)
     if getattr(args, "open_browser", False):
-        print(f"vibsynth: {open_in_browser(studio.url)}", file=out, flush=True)
+        # a command opening one tab (vibsynth lab: #lab) names it; the page selects it
+        print(f"vibsynth: {open_in_browser(studio.url + getattr(args, 'open_fragment', ''))}", file=out, flush=True)
 
 
 def serve(config: Any, args: Any, *, owns_process: bool = False) -> int:

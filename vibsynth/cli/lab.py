@@ -26,7 +26,8 @@ The paper's three experiments on your actuator, stimuli and participants (docs/l
   intensity      adjust each stimulus' gain (0.2-5) to feel as intense as a reference
   dissimilarity  rate all pairs (self-pairs included), stimulus - 500 ms - stimulus, 0..1
   resynthesis    rate 5 versions (O, S1, S1:8, S2:8, M) of each original against it, 0..1
-Without an action: serve and open the studio's Lab page, where sessions are run.
+Without an action: run the engine like `vibsynth serve` (same flags) and open the studio on
+its Lab tab, where sessions are set up, run and analysed (the URL ends in #lab).
 Sessions are folders under lab.folder (default: the platform data folder's lab/), named
 PARTICIPANT-PROTOCOL-DATE-TIME; give a session by its folder or that name.
 Stimulus sets: 'presets', 'presets:NAME,NAME', 'renders', 'renders:N' or a folder of WAVs.
@@ -38,6 +39,7 @@ SESSION_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,200}")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from vibsynth.cli import serve
     from vibsynth.settings.config import add_config_arguments
 
     p = subparsers.add_parser(
@@ -46,8 +48,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    add_config_arguments(p)
-    p.set_defaults(func=None)
+    serve.add_arguments(p)
+    p.set_defaults(func=run_open, open_browser=True, open_fragment="#lab")
     sub = p.add_subparsers(dest="lab_command", metavar="ACTION")
 
     ls = sub.add_parser("sessions", help="list the sessions (progress, protocol, participant)")
@@ -141,6 +143,16 @@ def _num(digits: int) -> Any:
 
 
 # --------------------------------------------------------------------------- actions
+def run_open(args: argparse.Namespace) -> int:
+    """``vibsynth lab``: ``vibsynth serve`` (same flags) and open the studio on its Lab tab."""
+    from vibsynth.cli import serve
+    from vibsynth.errors import ParameterError
+
+    if args.no_studio:
+        raise ParameterError("vibsynth lab --no-studio: the Lab page is part of the studio (use vibsynth serve)")
+    return serve.run(args)
+
+
 def run_sessions(args: argparse.Namespace) -> int:
     from vibsynth.research.lab.session import list_sessions
 

@@ -174,6 +174,7 @@ function mountTabs(studio) {
       panel.className = "workspace extension";
       panel.hidden = true;
       main.appendChild(panel);
+      if (location.hash === `#${ext.name}`) open(ext); // a link to one tab (vibsynth lab opens #lab)
     }
   });
 }
