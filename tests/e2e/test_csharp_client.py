@@ -154,6 +154,32 @@ def test_threads_and_async_queries_get_their_own_answers(server, client_check):
     assert seen["async.mismatched"] == "0"
 
 
+def test_clips_play_loop_report_and_stop(server, python_client, client_check):
+    seen = run_mono(client_check, "clips", server, "heartbeat")
+    assert seen["idle"] == "(no clip)"
+    # channel 1 loops until stopped, channel 2 plays 3 loop passes at half gain, twice as fast
+    assert (seen["ch1.name"], seen["ch1.playing"], seen["ch1.loops_left"]) == ("heartbeat", "true", "-1")
+    assert float(seen["ch1.position_ms"]) > 0  # it advanced in the 150 ms since it started
+    assert (seen["ch2.name"], seen["ch2.loops_left"]) == ("heartbeat", "2")
+    assert seen["ch3"] == "(no clip)"
+    assert (seen["status.clips_playing"], seen["status.ch1.clip"]) == ("2", "heartbeat")
+    # stopped: the channel glides back to its own knobs
+    assert seen["stopped"] == "(no clip)"
+    assert _texture(seen["stopped.texture"]) == pytest.approx((0.2, 0.0))
+    # a timetagged PlayClipAll: waiting at position 0 before its time, playing after
+    assert seen["all.before"] == "(heartbeat at 0 ms, -1 loops left)"
+    assert seen["all.after"] == "heartbeat"
+    assert seen["all.stopped"] == "(no clip)"
+    # refusals with the server's text
+    assert seen["refused.count"] == "2"
+    assert seen["refused.error0"].startswith("/vibsynth/ch/1/play: unknown clip 'no-such-clip'")
+    assert seen["refused.error1"] == "/vibsynth/ch/9/play: channel 9 out of range (this server has 3 channels: 1..3)"
+    assert seen["refused.ch1"] == "(no clip)"
+    # the server's view, read by the Python client
+    assert python_client.status()["clips_playing"] == 0
+    assert python_client.get("texture", 1) == pytest.approx((0.2, 0.0))
+
+
 # ---------------------------------------------------------------------- spatial sources
 @pytest.fixture(scope="module")
 def glove(tmp_path_factory, client_check):

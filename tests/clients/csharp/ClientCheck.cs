@@ -279,6 +279,9 @@ static class ClientCheck
         using (var client = new VibsynthClient("127.0.0.1", port))
         {
             client.Timeout = TimeSpan.FromSeconds(5);
+            client.SetGlide(1, 0f);
+            client.SetTexture(1, 0.25f, -1.5f);
+            client.Sync();
             var seen = new List<string>();
             client.ErrorReceived += (sender, e) => { lock (seen) seen.Add(e.Error.Address); };
             // a query the server refuses: the error reply fails that query
