@@ -6,49 +6,19 @@ import json
 
 import pytest
 
+from tests.formats.haptic_samples import ahap, curve, event, meta
 from vibsynth.cli import main
 from vibsynth.formats.ahap import read_ahap
 from vibsynth.settings.clips import load_clip
 from vibsynth.settings.config import ENV_VARS
 
-BOING = {
-    "Version": 1.0,
-    "Metadata": {"Description": "a spring"},
-    "Pattern": [
-        {
-            "Event": {
-                "Time": 0.0,
-                "EventType": "HapticTransient",
-                "EventParameters": [
-                    {"ParameterID": "HapticIntensity", "ParameterValue": 0.8},
-                    {"ParameterID": "HapticSharpness", "ParameterValue": 0.4},
-                ],
-            }
-        },
-        {
-            "Event": {
-                "Time": 0.015,
-                "EventType": "HapticContinuous",
-                "EventDuration": 0.25,
-                "EventParameters": [
-                    {"ParameterID": "HapticIntensity", "ParameterValue": 0.8},
-                    {"ParameterID": "HapticSharpness", "ParameterValue": 0.75},
-                ],
-            }
-        },
-        {
-            "ParameterCurve": {
-                "ParameterID": "HapticIntensityControl",
-                "Time": 0.015,
-                "ParameterCurveControlPoints": [
-                    {"Time": 0, "ParameterValue": 1},
-                    {"Time": 0.25, "ParameterValue": 0.0},
-                ],
-            }
-        },
-        {"Event": {"Time": 0.3, "EventType": "AudioCustom", "EventWaveformPath": "boing.wav"}},
-    ],
-}
+BOING = ahap(
+    event(0.0, "HapticTransient", intensity=0.8, sharpness=0.4),
+    event(0.015, duration=0.25, intensity=0.8, sharpness=0.75),
+    curve("HapticIntensityControl", 0.015, [(0, 1), (0.25, 0.0)]),
+    event(0.3, "AudioCustom", EventWaveformPath="boing.wav"),
+    Metadata={"Description": "a spring"},
+)
 
 
 @pytest.fixture(autouse=True)
@@ -109,7 +79,7 @@ def test_validate_names_the_line(tmp_path, capsys):
 
 def test_import_ahap_into_the_user_folder_then_export_it_back(tmp_path, capsys, isolated):
     src = tmp_path / "Boing Spring.ahap"
-    src.write_text(json.dumps(BOING))
+    src.write_text(BOING)
     code, out, err = run(capsys, "clip", "import", str(src))
     assert code == 0 and out.startswith(f"wrote {isolated / 'Boing-Spring.yaml'}: 265 ms")
     assert "vibsynth: warning:" in err and "AudioCustom events (audio is not played)" in err
@@ -132,19 +102,7 @@ def test_import_ahap_into_the_user_folder_then_export_it_back(tmp_path, capsys, 
 def test_import_with_name_output_and_mapping_from_the_config(tmp_path, capsys):
     src = tmp_path / "hit.haptic"
     src.write_text(
-        json.dumps(
-            {
-                "version": {"major": 1},
-                "signals": {
-                    "continuous": {
-                        "envelopes": {
-                            "amplitude": [{"time": 0, "amplitude": 0.5}, {"time": 0.2, "amplitude": 0.5}],
-                            "frequency": [{"time": 0, "frequency": 1.0}],
-                        }
-                    }
-                },
-            }
-        )
+        meta([{"time": 0, "amplitude": 0.5}, {"time": 0.2, "amplitude": 0.5}], [{"time": 0, "frequency": 1.0}])
     )
     code, out, _ = run(
         capsys,
@@ -171,7 +129,7 @@ def test_a_failed_import_writes_nothing(tmp_path, capsys, isolated):
     code, _, err = run(capsys, "clip", "import", str(bad))
     assert code == 1 and err.startswith(f"vibsynth: error: {bad}: NaN is not a number") and err.count("\n") == 1
     assert not isolated.exists() or not any(isolated.iterdir())
-    (tmp_path / "keep.ahap").write_text(json.dumps(BOING))
+    (tmp_path / "keep.ahap").write_text(BOING)
     assert run(capsys, "clip", "import", str(tmp_path / "keep.ahap"))[0] == 0
     before = (isolated / "keep.yaml").read_bytes()
     code, _, err = run(capsys, "clip", "import", str(tmp_path / "keep.ahap"))

@@ -23,7 +23,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.e2e.jackutil import e2e_required
+from tests.e2e.jackutil import e2e_required, stop_process
+from tests.formats.haptic_samples import SPRING
 from vibsynth.settings.clips import load_clip
 
 pytestmark = pytest.mark.e2e
@@ -32,44 +33,6 @@ ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "clip-lane-e2e-token-0123456789"
 START_TIMEOUT_S = 120.0
 WAIT_S = 15.0
-
-SPRING = {
-    "Version": 1.0,
-    "Metadata": {"Description": "a spring"},
-    "Pattern": [
-        {
-            "Event": {
-                "Time": 0.0,
-                "EventType": "HapticTransient",
-                "EventParameters": [
-                    {"ParameterID": "HapticIntensity", "ParameterValue": 0.8},
-                    {"ParameterID": "HapticSharpness", "ParameterValue": 0.4},
-                ],
-            }
-        },
-        {
-            "Event": {
-                "Time": 0.015,
-                "EventType": "HapticContinuous",
-                "EventDuration": 0.25,
-                "EventParameters": [
-                    {"ParameterID": "HapticIntensity", "ParameterValue": 0.8},
-                    {"ParameterID": "HapticSharpness", "ParameterValue": 0.4},
-                ],
-            }
-        },
-        {
-            "ParameterCurve": {
-                "ParameterID": "HapticIntensityControl",
-                "Time": 0.015,
-                "ParameterCurveControlPoints": [
-                    {"Time": 0, "ParameterValue": 1},
-                    {"Time": 0.25, "ParameterValue": 0.0},
-                ],
-            }
-        },
-    ],
-}
 
 
 def _browser_or_skip():
@@ -148,12 +111,7 @@ def service(tmp_path):
                 raise AssertionError("the studio did not answer in time:\n" + log_path.read_text()) from None
             time.sleep(0.2)
     yield base, clips, state, tmp_path
-    proc.terminate()
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
+    stop_process(proc)
 
 
 def _wait(browser, condition, what: str, timeout: float = WAIT_S):
@@ -211,7 +169,7 @@ def test_the_clip_lane_in_a_browser(service):
 
         # import an AHAP file through the file picker: shown unsaved, then saved under its name
         spring = tmp_path / "spring.ahap"
-        spring.write_text(json.dumps(SPRING))
+        spring.write_text(SPRING)
         browser.find_element(*_by("clip-import-file")).send_keys(str(spring))
         _wait(browser, lambda b: b.find_element(*_by("clip-name")).get_attribute("value") == "spring", "the import")
         assert (

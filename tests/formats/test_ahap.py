@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from tests.formats.haptic_samples import ahap, curve, event
 from vibsynth.errors import ClipError
 from vibsynth.formats.ahap import (
     CURVE_POINTS,
@@ -20,33 +21,6 @@ from vibsynth.formats.ahap import (
     write_ahap,
 )
 from vibsynth.formats.haptic_design import HapticDesign, Segment, Tap
-
-
-def event(t, kind="HapticContinuous", duration=None, intensity=None, sharpness=None, **extra):
-    params = []
-    if intensity is not None:
-        params.append({"ParameterID": "HapticIntensity", "ParameterValue": intensity})
-    if sharpness is not None:
-        params.append({"ParameterID": "HapticSharpness", "ParameterValue": sharpness})
-    body = {"Time": t, "EventType": kind, "EventParameters": params, **extra}
-    if duration is not None:
-        body["EventDuration"] = duration
-    return {"Event": body}
-
-
-def curve(pid, t, points):
-    return {
-        "ParameterCurve": {
-            "ParameterID": pid,
-            "Time": t,
-            "ParameterCurveControlPoints": [{"Time": a, "ParameterValue": v} for a, v in points],
-        }
-    }
-
-
-def ahap(*entries, **top):
-    return json.dumps({"Version": 1.0, "Metadata": {"Project": "test"}, "Pattern": list(entries), **top})
-
 
 # Apple's "spring" example: a transient, a continuous event shaped by an intensity and a sharpness curve
 BOING = ahap(

@@ -6,26 +6,13 @@ import json
 
 import pytest
 
+from tests.formats.haptic_samples import meta
 from vibsynth.errors import ClipError
 from vibsynth.formats.haptic_design import Tap
 from vibsynth.formats.meta_haptic import MAX_HAPTIC_BYTES, parse_meta_haptic, read_meta_haptic
 
-
-def haptic(amplitude, frequency=None, **top):
-    envelopes = {"amplitude": amplitude}
-    if frequency is not None:
-        envelopes["frequency"] = frequency
-    doc = {
-        "version": {"major": 1, "minor": 0, "patch": 0},
-        "metadata": {"editor": "Meta Haptics Studio", "tags": ["test"], "description": "a test"},
-        "signals": {"continuous": {"envelopes": envelopes}},
-        **top,
-    }
-    return json.dumps(doc)
-
-
 # shaped like the published example (valid_v1.haptic of the Lofelt SDK): an emphasis on the third breakpoint
-EXAMPLE = haptic(
+EXAMPLE = meta(
     [
         {"time": 0.0, "amplitude": 0.2},
         {"time": 0.1, "amplitude": 0.3},
@@ -50,7 +37,7 @@ def test_envelopes_are_linear_and_emphasis_is_a_tap():
 
 def test_equal_times_are_a_step_and_silence_before_the_first_amplitude_breakpoint():
     d = parse_meta_haptic(
-        haptic(
+        meta(
             [
                 {"time": 0.1, "amplitude": 0.8},
                 {"time": 0.3, "amplitude": 0.8},
@@ -68,7 +55,7 @@ def test_equal_times_are_a_step_and_silence_before_the_first_amplitude_breakpoin
 
 def test_unknown_fields_are_listed():
     d = parse_meta_haptic(
-        haptic([{"time": 0.0, "amplitude": 0.5, "curve": "ease"}, {"time": 0.2, "amplitude": 0.0}], signals2=1),
+        meta([{"time": 0.0, "amplitude": 0.5, "curve": "ease"}, {"time": 0.2, "amplitude": 0.0}], signals2=1),
         "x.haptic",
     )
     assert d.ignored == ("unknown field signals2", "unknown field signals.continuous.envelopes.amplitude[].curve")
@@ -77,30 +64,30 @@ def test_unknown_fields_are_listed():
 @pytest.mark.parametrize(
     "text, message",
     [
-        (haptic([{"time": 0.0, "amplitude": 1.5}]), "amplitude[0].amplitude = 1.5: outside the allowed range [0, 1]"),
+        (meta([{"time": 0.0, "amplitude": 1.5}]), "amplitude[0].amplitude = 1.5: outside the allowed range [0, 1]"),
         (
-            haptic([{"time": 0.2, "amplitude": 0.1}, {"time": 0.1, "amplitude": 0.1}]),
+            meta([{"time": 0.2, "amplitude": 0.1}, {"time": 0.1, "amplitude": 0.1}]),
             "amplitude[1].time = 0.1: breakpoint times must not decrease",
         ),
-        (haptic([{"time": 0.0}]), "amplitude[0]: missing key 'amplitude'"),
+        (meta([{"time": 0.0}]), "amplitude[0]: missing key 'amplitude'"),
         (
-            haptic([{"time": 0.0, "amplitude": 0.1, "emphasis": {"amplitude": 0.5}}]),
+            meta([{"time": 0.0, "amplitude": 0.1, "emphasis": {"amplitude": 0.5}}]),
             "emphasis: missing key 'frequency'",
         ),
         (
-            haptic([{"time": 0.0, "amplitude": 0.1, "emphasis": {"amplitude": 0.5, "frequency": 2}}]),
+            meta([{"time": 0.0, "amplitude": 0.1, "emphasis": {"amplitude": 0.5, "frequency": 2}}]),
             "emphasis.frequency = 2: outside the allowed range [0, 1]",
         ),
-        (haptic([]), "envelopes.amplitude: is empty"),
-        (haptic([{"time": 0.0, "amplitude": 0.1}], [{"time": -1, "frequency": 0.1}]), "frequency[0].time = -1"),
-        (haptic([{"time": 0.0, "amplitude": 0.1}], version={"major": 2}), "version.major = 2: this vibsynth reads"),
+        (meta([]), "envelopes.amplitude: is empty"),
+        (meta([{"time": 0.0, "amplitude": 0.1}], [{"time": -1, "frequency": 0.1}]), "frequency[0].time = -1"),
+        (meta([{"time": 0.0, "amplitude": 0.1}], version={"major": 2}), "version.major = 2: this vibsynth reads"),
         ('{"signals": {}}', "x.haptic: missing key 'version'"),
         ('{"version": {"major": 1}}', "x.haptic: missing key 'signals'"),
         (
             '{"version": {"major": 1}, "signals": {"continuous": {"envelopes": {"amplitude": [{"time": 0.1',
             "x.haptic:1:",
         ),
-        (haptic([{"time": float("nan"), "amplitude": 0.1}]), "NaN is not a number"),
+        (meta([{"time": float("nan"), "amplitude": 0.1}]), "NaN is not a number"),
     ],
 )
 def test_each_malformed_file_gets_one_clear_error(text, message):
@@ -112,7 +99,7 @@ def test_each_malformed_file_gets_one_clear_error(text, message):
 def test_huge_file_is_refused_before_reading(tmp_path):
     path = tmp_path / "huge.haptic"
     point = json.dumps({"time": 0.0, "amplitude": 0.1}) + ","
-    path.write_text(haptic([])[:-4] + point * 200_000 + "]}}}}")
+    path.write_text(meta([])[:-4] + point * 200_000 + "]}}}}")
     assert path.stat().st_size > MAX_HAPTIC_BYTES
     with pytest.raises(ClipError, match=r"over the 4 MiB limit for a .haptic file; not read"):
         read_meta_haptic(path)

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from tests.formats.haptic_samples import ahap, curve, event, meta
 from vibsynth.errors import ClipError
 from vibsynth.formats.ahap import ahap_text, parse_ahap
 from vibsynth.formats.haptic_design import HapticDesign, Segment, Tap
@@ -103,35 +104,12 @@ def test_ahap_clip_ahap_keeps_events_within_1ms_and_001(mapping):
         t += float(rng.uniform(0.01, 0.2))
         duration = float(rng.uniform(0.02, 0.3))
         i, s = (round(float(v), 3) for v in rng.uniform(0.05, 1, 2))
-        pattern.append(
-            {
-                "Event": {
-                    "Time": round(t, 4),
-                    "EventType": "HapticContinuous",
-                    "EventDuration": round(duration, 4),
-                    "EventParameters": [
-                        {"ParameterID": "HapticIntensity", "ParameterValue": i},
-                        {"ParameterID": "HapticSharpness", "ParameterValue": s},
-                    ],
-                }
-            }
-        )
+        pattern.append(event(round(t, 4), duration=round(duration, 4), intensity=i, sharpness=s))
         t += duration + float(rng.uniform(0.0, 0.05))
         if rng.random() < 0.7:
             i, s = (round(float(v), 3) for v in rng.uniform(0.05, 1, 2))
-            pattern.append(
-                {
-                    "Event": {
-                        "Time": round(t, 4),
-                        "EventType": "HapticTransient",
-                        "EventParameters": [
-                            {"ParameterID": "HapticIntensity", "ParameterValue": i},
-                            {"ParameterID": "HapticSharpness", "ParameterValue": s},
-                        ],
-                    }
-                }
-            )
-    original = json.dumps({"Version": 1, "Pattern": pattern})
+            pattern.append(event(round(t, 4), "HapticTransient", intensity=i, sharpness=s))
+    original = ahap(*pattern)
     clip = clip_from_design(parse_ahap(original, "in.ahap"), "trip", mapping)
     exported = ahap_text(design_from_clip(clip, mapping))
     before, after = _events(original), _events(exported)
@@ -143,64 +121,12 @@ def test_ahap_clip_ahap_keeps_events_within_1ms_and_001(mapping):
 
 
 def test_ahap_with_curves_round_trips_what_is_felt():
-    original = json.dumps(
-        {
-            "Version": 1,
-            "Pattern": [
-                {
-                    "Event": {
-                        "Time": 0.0,
-                        "EventType": "HapticTransient",
-                        "EventParameters": [
-                            {"ParameterID": "HapticIntensity", "ParameterValue": 0.8},
-                            {"ParameterID": "HapticSharpness", "ParameterValue": 0.4},
-                        ],
-                    }
-                },
-                {
-                    "Event": {
-                        "Time": 0.015,
-                        "EventType": "HapticContinuous",
-                        "EventDuration": 0.25,
-                        "EventParameters": [
-                            {"ParameterID": "HapticIntensity", "ParameterValue": 0.8},
-                            {"ParameterID": "HapticSharpness", "ParameterValue": 0.4},
-                        ],
-                    }
-                },
-                {
-                    "ParameterCurve": {
-                        "ParameterID": "HapticIntensityControl",
-                        "Time": 0.015,
-                        "ParameterCurveControlPoints": [
-                            {"Time": 0, "ParameterValue": 1},
-                            {"Time": 0.1, "ParameterValue": 0.5},
-                            {"Time": 0.25, "ParameterValue": 0},
-                        ],
-                    }
-                },
-                {
-                    "ParameterCurve": {
-                        "ParameterID": "HapticSharpnessControl",
-                        "Time": 0.015,
-                        "ParameterCurveControlPoints": [
-                            {"Time": 0, "ParameterValue": 0},
-                            {"Time": 0.25, "ParameterValue": -0.3},
-                        ],
-                    }
-                },
-                {
-                    "Event": {
-                        "Time": 0.12,
-                        "EventType": "HapticTransient",
-                        "EventParameters": [
-                            {"ParameterID": "HapticIntensity", "ParameterValue": 1.0},
-                            {"ParameterID": "HapticSharpness", "ParameterValue": 0.9},
-                        ],
-                    }
-                },
-            ],
-        }
+    original = ahap(
+        event(0.0, "HapticTransient", intensity=0.8, sharpness=0.4),
+        event(0.015, duration=0.25, intensity=0.8, sharpness=0.4),
+        curve("HapticIntensityControl", 0.015, [(0, 1), (0.1, 0.5), (0.25, 0)]),
+        curve("HapticSharpnessControl", 0.015, [(0, 0), (0.25, -0.3)]),
+        event(0.12, "HapticTransient", intensity=1.0, sharpness=0.9),
     )
     first = parse_ahap(original, "in.ahap")
     clip = clip_from_design(first, "boing", BENT)
@@ -220,22 +146,13 @@ def test_ahap_with_curves_round_trips_what_is_felt():
 
 
 def test_meta_haptic_import_maps_amplitude_frequency_and_emphasis():
-    text = json.dumps(
-        {
-            "version": {"major": 1, "minor": 0, "patch": 0},
-            "signals": {
-                "continuous": {
-                    "envelopes": {
-                        "amplitude": [
-                            {"time": 0.0, "amplitude": 0.0},
-                            {"time": 0.05, "amplitude": 1.0, "emphasis": {"amplitude": 1.0, "frequency": 1.0}},
-                            {"time": 0.5, "amplitude": 0.0},
-                        ],
-                        "frequency": [{"time": 0.0, "frequency": 0.25}, {"time": 0.5, "frequency": 0.75}],
-                    }
-                }
-            },
-        }
+    text = meta(
+        [
+            {"time": 0.0, "amplitude": 0.0},
+            {"time": 0.05, "amplitude": 1.0, "emphasis": {"amplitude": 1.0, "frequency": 1.0}},
+            {"time": 0.5, "amplitude": 0.0},
+        ],
+        [{"time": 0.0, "frequency": 0.25}, {"time": 0.5, "frequency": 0.75}],
     )
     clip = clip_from_design(parse_meta_haptic(text, "hit.haptic"), "hit", DEFAULT)
     assert clip.duration_ms == 500 and clip.transients[0].t_ms == 50

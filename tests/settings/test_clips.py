@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import logging
 import math
-import os
-import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.settings.helpers import Recorder, edit
 from vibsynth.errors import ClipError
 from vibsynth.settings.clips import (
     MAX_CLIP_BYTES,
@@ -381,30 +379,6 @@ def test_default_user_folder_is_the_platform_data_folder(tmp_path, monkeypatch):
     assert lib.user_dir == tmp_path / "data" / "vibsynth" / "clips"
 
 
-class Recorder:
-    def __init__(self) -> None:
-        self.calls: list[str] = []
-        self.event = threading.Event()
-
-    def __call__(self, name: str) -> None:
-        self.calls.append(name)
-        self.event.set()
-
-    def wait(self, timeout: float = 5.0) -> list[str]:
-        assert self.event.wait(timeout), "no change seen"
-        time.sleep(0.1)  # let a burst of changes settle
-        calls, self.calls = self.calls, []
-        self.event.clear()
-        return calls
-
-
-def edit(path: Path, text: str) -> None:
-    old = path.stat().st_mtime_ns if path.exists() else 0
-    path.write_text(text)
-    if path.stat().st_mtime_ns == old:
-        os.utime(path, ns=(old + 1_000_000, old + 1_000_000))
-
-
 def test_hot_reload_edit_break_fix_add_delete(dirs, caplog):
     shipped, user = dirs
     user.mkdir()
@@ -415,7 +389,7 @@ def test_hot_reload_edit_break_fix_add_delete(dirs, caplog):
     with caplog.at_level(logging.INFO, logger="vibsynth.settings"), ClipWatcher(lib, rec, interval_s=0.05) as watcher:
         assert watcher._thread is not None and watcher._thread.name == "vibsynth-clip-watcher"
         edit(target, one(0.6))
-        assert rec.wait() == ["mine"] and lib.get("mine").keyframes[0].intensity == 0.6
+        assert rec.wait(5.0) == ["mine"] and lib.get("mine").keyframes[0].intensity == 0.6
         edit(target, one(7))  # broken: the last good version stays
         deadline = time.monotonic() + 5
         while "intensity = 7" not in lib.errors.get(str(target), "") and time.monotonic() < deadline:
@@ -423,11 +397,11 @@ def test_hot_reload_edit_break_fix_add_delete(dirs, caplog):
         assert "mine.yaml:2: keyframes[0].intensity = 7" in lib.errors[str(target)]
         assert lib.get("mine").keyframes[0].intensity == 0.6 and rec.calls == []
         edit(target, one(0.7))
-        assert rec.wait() == ["mine"] and not lib.errors
+        assert rec.wait(5.0) == ["mine"] and not lib.errors
         save_clip(Clip("extra", 10.0, (Keyframe(0, 0.2, 0.0),)), user / "extra.yaml")
-        assert rec.wait() == ["extra"]
+        assert rec.wait(5.0) == ["extra"]
         target.unlink()
-        assert rec.wait() == ["mine"] and lib.names() == ["extra", "thud", "tick"]
+        assert rec.wait(5.0) == ["mine"] and lib.names() == ["extra", "thud", "tick"]
     assert "clip 'mine' changed" in caplog.text and "clip 'extra' added" in caplog.text
 
 

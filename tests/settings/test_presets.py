@@ -5,13 +5,13 @@ from __future__ import annotations
 import importlib.util
 import logging
 import os
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.settings.helpers import Recorder, edit
 from vibsynth.errors import PresetError
 from vibsynth.settings.config import load_config
 from vibsynth.settings.library import PresetLibrary, load_library, shipped_presets_dir
@@ -233,30 +233,6 @@ def test_default_user_dir_is_platform_data_dir(tmp_path, monkeypatch):
 
 
 # --------------------------------------------------------------------------- hot reload
-class Recorder:
-    def __init__(self) -> None:
-        self.calls: list[str] = []
-        self.event = threading.Event()
-
-    def __call__(self, name: str) -> None:
-        self.calls.append(name)
-        self.event.set()
-
-    def wait(self, timeout: float = 1.0) -> list[str]:
-        assert self.event.wait(timeout), "no change picked up within a second"
-        self.event.clear()
-        calls, self.calls = self.calls, []
-        return calls
-
-
-def edit(path: Path, text: str) -> None:
-    """Write in place (not atomic, like many editors) and make sure the mtime moves."""
-    old = path.stat().st_mtime_ns if path.exists() else 0
-    path.write_text(text)
-    if path.stat().st_mtime_ns == old:
-        os.utime(path, ns=(old + 1_000_000, old + 1_000_000))
-
-
 def test_watcher_edit_break_fix_delete(dirs, caplog):
     shipped, user = dirs
     user.mkdir()

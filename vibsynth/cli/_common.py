@@ -6,8 +6,9 @@ import argparse
 import math
 import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
@@ -22,6 +23,7 @@ __all__ = [
     "positive_seconds",
     "sample_rate",
     "file_name_argument",
+    "validate_files",
     "add_basis_argument",
     "basis_from_args",
     "Progress",
@@ -92,6 +94,44 @@ def file_name_argument(noun: str) -> Callable[[str], str]:
         return text
 
     return parse
+
+
+def validate_files(
+    paths: Sequence[Path],
+    load: Callable[[Path], Any],
+    error: type[Exception],
+    noun: str,
+    describe: Callable[[Any], str],
+) -> int:
+    """``vibsynth preset|clip validate``: read files as the library does; one line per file; the exit code.
+
+    Parameters
+    ----------
+    paths : sequence of Path
+    load : callable
+        Reads one file; raises ``error`` (its message names file:line).
+    noun : str
+        ``preset``, ``clip``: for the summary line.
+    describe : callable
+        The loaded item -> the text after ``OK`` (``(brick: intensity 0.750, balance -0.870)``).
+
+    Returns
+    -------
+    int
+        0 when every file is valid, else 1.
+    """
+    bad = 0
+    for path in paths:
+        try:
+            item = load(path)
+        except error as exc:
+            bad += 1
+            print(f"vibsynth: error: {exc}", file=sys.stderr)
+        else:
+            print(f"{path}: OK {describe(item)}")
+    if bad and len(paths) > 1:
+        print(f"{bad} of {len(paths)} {noun} files are invalid", file=sys.stderr)
+    return 1 if bad else 0
 
 
 def add_basis_argument(parser: argparse.ArgumentParser) -> None:

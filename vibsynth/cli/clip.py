@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from vibsynth.cli._clip_play import add_clip_play_parsers
-from vibsynth.cli._common import file_name_argument
+from vibsynth.cli._common import file_name_argument, validate_files
 from vibsynth.cli._table import Column, add_format_argument, emit, output_format
 from vibsynth.errors import ClipError, ParameterError
 from vibsynth.formats.haptic_design import HapticDesign
@@ -122,18 +122,7 @@ def cmd_show(args: argparse.Namespace) -> int:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """Check clip files the way the library reads them; one line per file, exit 1 if any is bad."""
-    bad = 0
-    for path in args.files:
-        try:
-            clip = load_clip(path)
-        except ClipError as exc:
-            bad += 1
-            print(f"vibsynth: error: {exc}", file=sys.stderr)
-        else:
-            print(f"{path}: OK ({clip.name}: {_summary(clip)})")
-    if bad and len(args.files) > 1:
-        print(f"{bad} of {len(args.files)} clip files are invalid", file=sys.stderr)
-    return 1 if bad else 0
+    return validate_files(args.files, load_clip, ClipError, "clip", lambda c: f"({c.name}: {_summary(c)})")
 
 
 def _kind(path: Path, given: str | None) -> str:

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from vibsynth import __version__
-from vibsynth.cli._common import file_name_argument
+from vibsynth.cli._common import file_name_argument, validate_files
 from vibsynth.cli._inputs import wav_channel
 from vibsynth.cli._table import Column, add_format_argument, emit, output_format
 from vibsynth.errors import ParameterError, PresetError
@@ -149,18 +149,13 @@ def cmd_validate(args: argparse.Namespace) -> int:
     """Check preset files the way the library reads them; one line per file, exit 1 if any is bad."""
     from vibsynth.settings.presets import load_preset
 
-    bad = 0
-    for path in args.files:
-        try:
-            preset = load_preset(path)
-        except PresetError as exc:
-            bad += 1
-            print(f"vibsynth: error: {exc}", file=sys.stderr)
-        else:
-            print(f"{path}: OK ({preset.name}: intensity {preset.intensity:.3f}, balance {preset.balance:+.3f})")
-    if bad and len(args.files) > 1:
-        print(f"{bad} of {len(args.files)} preset files are invalid", file=sys.stderr)
-    return 1 if bad else 0
+    return validate_files(
+        args.files,
+        load_preset,
+        PresetError,
+        "preset",
+        lambda p: f"({p.name}: intensity {p.intensity:.3f}, balance {p.balance:+.3f})",
+    )
 
 
 def cmd_rm(args: argparse.Namespace) -> int:

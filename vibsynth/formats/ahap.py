@@ -213,17 +213,25 @@ def _control_range(pid: str) -> tuple[float, float]:
     return (0.0, 1.0) if pid == _INTENSITY else (-1.0, 1.0)
 
 
+def _control_id(
+    r: _Reader, body: dict[str, Any], path: JsonPath, controls: dict[str, _Control], what: str
+) -> str | None:
+    """The control a curve or parameter sets; None (noted) for one vibsynth does not apply."""
+    pid = body.get("ParameterID")
+    if pid in controls:
+        return str(pid)
+    if not isinstance(pid, str):
+        raise r.fail(path + ("ParameterID",), f"= {pid!r}: must be a parameter name")
+    r.note(f"{what} of {pid} (not applied)")
+    return None
+
+
 def _curve(r: _Reader, raw: Any, path: JsonPath, controls: dict[str, _Control], budget: list[int]) -> None:
     curve = r.mapping(raw, path)
-    pid = curve.get("ParameterID")
-    if pid not in controls:
-        if not isinstance(pid, str):
-            raise r.fail(path + ("ParameterID",), f"= {pid!r}: must be a parameter name")
-        r.note(f"parameter curves of {pid} (not applied)")
+    pid = _control_id(r, curve, path, controls, "parameter curves")
+    if pid is None:
         return
-    if "Time" not in curve:
-        raise r.fail(path, "missing key 'Time'")
-    start = r.time(curve["Time"], path + ("Time",))
+    start = r.time(r.require(curve, "Time", path), path + ("Time",))
     points = r.items(curve.get("ParameterCurveControlPoints"), path + ("ParameterCurveControlPoints",))
     if not points:
         raise r.fail(path + ("ParameterCurveControlPoints",), "is empty (a curve needs at least one point)")
@@ -253,15 +261,11 @@ def _curve(r: _Reader, raw: Any, path: JsonPath, controls: dict[str, _Control], 
 
 def _parameter(r: _Reader, raw: Any, path: JsonPath, controls: dict[str, _Control]) -> None:
     param = r.mapping(raw, path)
-    pid = param.get("ParameterID")
-    if pid not in controls:
-        if not isinstance(pid, str):
-            raise r.fail(path + ("ParameterID",), f"= {pid!r}: must be a parameter name")
-        r.note(f"dynamic parameters {pid} (not applied)")
+    pid = _control_id(r, param, path, controls, "dynamic parameters")
+    if pid is None:
         return
     for key in ("Time", "ParameterValue"):
-        if key not in param:
-            raise r.fail(path, f"missing key {key!r}")
+        r.require(param, key, path)
     t = r.time(param["Time"], path + ("Time",))
     low, high = _control_range(pid)
     controls[pid].add(t, [t], [r.clamped(param["ParameterValue"], path + ("ParameterValue",), low, high)])

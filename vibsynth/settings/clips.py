@@ -35,15 +35,22 @@ import numpy as np
 import numpy.typing as npt
 
 from vibsynth.errors import ClipError
-from vibsynth.formats.files import MAX_YAML_BYTES, atomic_write
+from vibsynth.formats.files import MAX_YAML_BYTES
 from vibsynth.settings.config import Config
 from vibsynth.settings.fields import show
 from vibsynth.settings.library import FileLibrary, LibraryKind, shipped_dir, user_dir_of
 from vibsynth.settings.models_clip import CLIP_VERSION, ClipModel
-from vibsynth.settings.presets import SUFFIX, dump_block
 from vibsynth.settings.reload import LibraryWatcher
 from vibsynth.settings.validation import InvalidClipError, model_spec, validate
-from vibsynth.settings.yamldoc import YamlDocument, parse_yaml, read_yaml_file
+from vibsynth.settings.yamldoc import (
+    SUFFIX,
+    YamlDocument,
+    dump_block,
+    file_stem,
+    parse_yaml,
+    read_yaml_file,
+    write_checked,
+)
 
 __all__ = [
     "WHAT",
@@ -324,10 +331,6 @@ def parse_clip(text: str, origin: str = "<clip>", *, name: str | None = None) ->
     return _from_document(parse_yaml(text, origin, error=ClipError, what=WHAT), name)
 
 
-def _stem(path: Path) -> str:
-    return path.name[: -len(SUFFIX)] if path.name.endswith(SUFFIX) else path.stem
-
-
 def load_clip(path: str | os.PathLike[str], *, origin: str = "") -> Clip:
     """Read and validate a clip file (its name is the file name without ``.yaml``).
 
@@ -336,7 +339,7 @@ def load_clip(path: str | os.PathLike[str], *, origin: str = "") -> Clip:
     """
     p = Path(path)
     doc = read_yaml_file(p, error=ClipError, what=WHAT)
-    return replace(_from_document(doc, _stem(p)), path=p, origin=origin)
+    return replace(_from_document(doc, file_stem(p)), path=p, origin=origin)
 
 
 # --------------------------------------------------------------------------- writing
@@ -360,13 +363,11 @@ def save_clip(clip: Clip, path: str | os.PathLike[str] | None = None, *, header:
     target = Path(path) if path is not None else clip.path
     if target is None:
         raise ClipError(f"clip {clip.name!r}: no file to save to")
-    text = clip_to_yaml(clip, header=header)
-    parse_clip(text, str(target), name=_stem(target))  # never write what we could not read back
-    try:
-        atomic_write(target, text)
-    except OSError as exc:
-        raise ClipError(f"{target}: cannot write ({exc.strerror})") from None
-    return target
+    return write_checked(target, clip_to_yaml(clip, header=header), _parse_named, ClipError)
+
+
+def _parse_named(text: str, origin: str, name: str) -> Clip:
+    return parse_clip(text, origin, name=name)
 
 
 # --------------------------------------------------------------------------- the library
@@ -413,14 +414,7 @@ class ClipLibrary(FileLibrary[Clip]):
     only files whose (mtime, size, inode) changed.
     """
 
-    def __init__(
-        self,
-        shipped_dir: str | os.PathLike[str] | None = None,
-        user_dir: str | os.PathLike[str] | None = None,
-        *,
-        load: bool = True,
-    ) -> None:
-        super().__init__(CLIPS, shipped_dir, user_dir, load=load)
+    kind = CLIPS
 
     def clips(self) -> list[Clip]:
         """Every effective clip, sorted by name."""

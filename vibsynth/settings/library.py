@@ -148,10 +148,10 @@ class _FileState(Generic[T]):
 class FileLibrary(Generic[T]):
     """Shipped files plus a user folder; a user file overrides a shipped one of the same name.
 
+    A subclass sets :attr:`kind` (:class:`PresetLibrary`, :class:`vibsynth.settings.clips.ClipLibrary`).
+
     Parameters
     ----------
-    kind : LibraryKind
-        What the files are (presets, clips) and how to read them.
     shipped_dir : path-like or None
         Shipped files. None = none (tests).
     user_dir : path-like or None
@@ -175,15 +175,16 @@ class FileLibrary(Generic[T]):
     they appear, not at every poll, and a folder that can be listed again is reported once.
     """
 
+    #: What the files are (presets, clips) and how to read them: set by each subclass.
+    kind: LibraryKind[T]
+
     def __init__(
         self,
-        kind: LibraryKind[T],
         shipped_dir: str | os.PathLike[str] | None = None,
         user_dir: str | os.PathLike[str] | None = None,
         *,
         load: bool = True,
     ) -> None:
-        self.kind = kind
         self.shipped_dir = Path(shipped_dir) if shipped_dir is not None else None
         self.user_dir = Path(user_dir).expanduser() if user_dir is not None else None
         self._lock = threading.RLock()  # guards the published state (short holds only)
@@ -521,14 +522,7 @@ class PresetLibrary(FileLibrary[Preset]):
     See :class:`FileLibrary` for reloading and errors.
     """
 
-    def __init__(
-        self,
-        shipped_dir: str | os.PathLike[str] | None = None,
-        user_dir: str | os.PathLike[str] | None = None,
-        *,
-        load: bool = True,
-    ) -> None:
-        super().__init__(PRESETS, shipped_dir, user_dir, load=load)
+    kind = PRESETS
 
     def presets(self) -> list[Preset]:
         """Every effective preset, sorted by name."""

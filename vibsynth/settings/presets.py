@@ -30,8 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from vibsynth.errors import PresetError
-from vibsynth.formats.files import MAX_YAML_BYTES, atomic_write
-from vibsynth.formats.yamlio import dump_yaml
+from vibsynth.formats.files import MAX_YAML_BYTES
 from vibsynth.settings.fields import show
 from vibsynth.settings.models_preset import (
     BALANCE_LIMIT,
@@ -44,7 +43,15 @@ from vibsynth.settings.models_preset import (
     PresetModel,
 )
 from vibsynth.settings.validation import InvalidPresetError, model_spec, validate
-from vibsynth.settings.yamldoc import YamlDocument, parse_yaml, read_yaml_file
+from vibsynth.settings.yamldoc import (
+    SUFFIX,
+    YamlDocument,
+    dump_block,
+    file_stem,
+    parse_yaml,
+    read_yaml_file,
+    write_checked,
+)
 
 __all__ = [
     "BALANCE_LIMIT",
@@ -70,7 +77,6 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 SCHEMA_VERSION = PRESET_VERSION
-SUFFIX = ".yaml"
 WHAT = "a preset"
 #: Preset files over this size are never read (a preset is about 1.5 KB).
 MAX_PRESET_BYTES = MAX_YAML_BYTES
@@ -268,9 +274,8 @@ def load_preset(path: str | os.PathLike[str], *, origin: str = "") -> Preset:
     are refused (see :func:`vibsynth.formats.yamlio.load_yaml`).
     """
     p = Path(path)
-    stem = p.name[: -len(SUFFIX)] if p.name.endswith(SUFFIX) else p.stem
     doc = read_yaml_file(p, error=PresetError, what=WHAT)
-    return replace(_from_document(doc, stem), path=p, origin=origin)
+    return replace(_from_document(doc, file_stem(p)), path=p, origin=origin)
 
 
 _HEADER = "# vibsynth preset (schema: docs/presets.md). Edit freely; saved atomically.\n"
@@ -279,20 +284,6 @@ _HEADER = "# vibsynth preset (schema: docs/presets.md). Edit freely; saved atomi
 def preset_to_yaml(preset: Preset, *, header: str = _HEADER) -> str:
     """YAML text of a preset (keys in schema order)."""
     return header + dump_block(preset.to_dict())
-
-
-def dump_block(data: Mapping[str, Any], indent: str = "") -> str:
-    """Block-style mapping at the top levels, short lists and leaf mappings inline: easy to hand-edit."""
-    out = []
-    for key, value in data.items():
-        if isinstance(value, Mapping) and value:
-            out.append(f"{indent}{key}:\n" + dump_block(value, indent + "  "))
-            continue
-        text = dump_yaml(
-            {key: value}, sort_keys=False, width=100, default_flow_style=None if isinstance(value, list) else False
-        )
-        out.append("".join(indent + line if line.strip() else line for line in text.splitlines(keepends=True)))
-    return "".join(out)
 
 
 def save_preset(preset: Preset, path: str | os.PathLike[str] | None = None, *, header: str = _HEADER) -> Path:
@@ -307,11 +298,8 @@ def save_preset(preset: Preset, path: str | os.PathLike[str] | None = None, *, h
     target = Path(path) if path is not None else preset.path
     if target is None:
         raise PresetError(f"preset {preset.name!r}: no file to save to")
-    text = preset_to_yaml(preset, header=header)
-    stem = target.name[: -len(SUFFIX)] if target.name.endswith(SUFFIX) else target.stem
-    parse_preset(text, str(target), name=stem)  # never write what we could not read back
-    try:
-        atomic_write(target, text)
-    except OSError as exc:
-        raise PresetError(f"{target}: cannot write ({exc.strerror})") from None
-    return target
+    return write_checked(target, preset_to_yaml(preset, header=header), _parse_named, PresetError)
+
+
+def _parse_named(text: str, origin: str, name: str) -> Preset:
+    return parse_preset(text, origin, name=name)

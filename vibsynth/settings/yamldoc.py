@@ -1,9 +1,11 @@
-"""YAML documents that remember the line of every key, so each error can say ``file:line``."""
+"""YAML documents that remember the line of every key, so each error can say ``file:line``; and the
+way settings files (presets, clips) are written back: hand-editable blocks, checked before writing."""
 
 from __future__ import annotations
 
 import os
 import reprlib
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -141,3 +143,50 @@ def short_repr(value: Any) -> str:
     """``repr`` for error messages, bounded: a long list or text is cut with ``...`` (reprlib
     never builds the full text, so a large value cannot blow up a message)."""
     return _SHORT.repr(value)
+
+
+# --------------------------------------------------------------------------- writing settings files
+SUFFIX = ".yaml"
+
+
+def file_stem(path: Path) -> str:
+    """A settings file's name without ``.yaml`` (its preset or clip name)."""
+    return path.name[: -len(SUFFIX)] if path.name.endswith(SUFFIX) else path.stem
+
+
+def dump_block(data: Mapping[str, Any], indent: str = "") -> str:
+    """Block-style mapping at the top levels, short lists and leaf mappings inline: easy to hand-edit."""
+    from vibsynth.formats.yamlio import dump_yaml
+
+    out = []
+    for key, value in data.items():
+        if isinstance(value, Mapping) and value:
+            out.append(f"{indent}{key}:\n" + dump_block(value, indent + "  "))
+            continue
+        text = dump_yaml(
+            {key: value}, sort_keys=False, width=100, default_flow_style=None if isinstance(value, list) else False
+        )
+        out.append("".join(indent + line if line.strip() else line for line in text.splitlines(keepends=True)))
+    return "".join(out)
+
+
+def write_checked(target: Path, text: str, parse: Callable[[str, str, str], Any], error: type[Exception]) -> Path:
+    """Write a settings file atomically, after reading the text back (never write what cannot be read).
+
+    Parameters
+    ----------
+    target : pathlib.Path
+    text : str
+    parse : callable
+        ``parse(text, origin, name)``: raises ``error`` when the text is not a valid file of its kind.
+    error : exception class
+        Also raised (naming the file) when it cannot be written.
+    """
+    from vibsynth.formats.files import atomic_write
+
+    parse(text, str(target), file_stem(target))
+    try:
+        atomic_write(target, text)
+    except OSError as exc:
+        raise error(f"{target}: cannot write ({exc.strerror})") from None
+    return target
