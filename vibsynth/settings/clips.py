@@ -371,10 +371,6 @@ def _parse_named(text: str, origin: str, name: str) -> Clip:
 
 
 # --------------------------------------------------------------------------- the library
-def _save(clip: Clip, path: Path) -> Path:
-    return save_clip(clip, path)
-
-
 #: Clips as a kind of library file (see :class:`~vibsynth.settings.library.FileLibrary`).
 CLIPS: LibraryKind[Clip] = LibraryKind(
     noun="clip",
@@ -382,7 +378,7 @@ CLIPS: LibraryKind[Clip] = LibraryKind(
     folder="clips",
     section="clips",
     load=load_clip,
-    save=_save,
+    save=save_clip,
     error=ClipError,
     unknown=UnknownClipError,
     max_bytes=MAX_CLIP_BYTES,

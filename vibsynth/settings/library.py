@@ -490,17 +490,13 @@ class FileLibrary(Generic[T]):
         return path
 
 
-def _save_preset(preset: Preset, path: Path) -> Path:
-    return save_preset(preset, path)
-
-
 PRESETS: LibraryKind[Preset] = LibraryKind(
     noun="preset",
     what=WHAT,
     folder="presets",
     section="presets",
     load=load_preset,
-    save=_save_preset,
+    save=save_preset,
     error=PresetError,
     unknown=UnknownPresetError,
     max_bytes=MAX_PRESET_BYTES,
