@@ -12,6 +12,7 @@ from tests.control.osc.fakes import make_controller
 from tests.control.studio.helpers import http, origin
 from vibsynth.app.clips.studio import StudioClips, studio_extension
 from vibsynth.app.studio_tabs import studio_extensions
+from vibsynth.control.clips import attach
 from vibsynth.control.studio.server import StudioServer
 from vibsynth.settings.clips import load_clip, parse_clip
 from vibsynth.settings.config import load_config
@@ -199,7 +200,7 @@ def test_play_stop_and_playing_go_through_the_player(lane, controller):
         return parse_clip("duration_ms: 10\nkeyframes: [{t_ms: 0, intensity: 0, balance: 0}]\n", name=name)
 
     player = FakePlayer(resolve)
-    controller.clips = player
+    attach(controller, player)
     status, data = call(lane, "POST", "/ext/clips/play", {"name": "draft", "channel": 2, "loop": True, "clip": GOOD})
     assert status == 200 and data == {"playing": "draft", "channel": 2, "loop": True}
     assert player.calls == [("play", "studio:draft", (1,), 0, "studio")]
@@ -232,7 +233,7 @@ def test_play_stop_and_playing_go_through_the_player(lane, controller):
 )
 def test_play_refusals_name_the_problem_and_play_nothing(lane, controller, body, message):
     player = FakePlayer(lambda name: None)
-    controller.clips = player
+    attach(controller, player)
     status, data = call(lane, "POST", "/ext/clips/play", body)
     assert status in (400, 404) and data["message"].startswith(message) and player.calls == []
 

@@ -13,8 +13,9 @@ checks:
 ``POST /ext/clips/stop``             ``{"channel"}``
 ``GET  /ext/clips/playing?channel=N``  what plays there: name, position in ms, loops left
 
-Playback goes through the service's clip player (``controller.clips``, attached by the service);
-without one, play answers an error. File work runs on worker threads, never on the studio's loop.
+Playback goes through the service's clip player (:func:`vibsynth.control.clips.player_of`, attached
+by the service's clips adapter); without one, play answers an error. File work runs on worker
+threads, never on the studio's loop.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from typing import Any
 
 from aiohttp import web
 
+from vibsynth.control.clips import player_of
 from vibsynth.errors import ClipError, ParameterError, VibsynthError
 from vibsynth.formats.ahap import parse_ahap
 from vibsynth.formats.haptic_design import HapticDesign
@@ -103,7 +105,7 @@ class ClipLane:
     config : Config
         For the import mapping (``clips:``).
     controller : Controller
-        Its ``clips`` attribute is the service's clip player (looked up at each request).
+        Its clip player (:func:`~vibsynth.control.clips.player_of`) is looked up at each request.
     library : ClipLibrary
         Shipped + user clips; re-read (only what changed) before each listing and lookup.
     """
@@ -129,7 +131,7 @@ class ClipLane:
         return value - 1
 
     def _player(self) -> Any:
-        player = getattr(self.controller, "clips", None)
+        player = player_of(self.controller)
         if player is None:
             raise VibsynthError("clips are not available (no clip player is running)")
         return player
@@ -187,7 +189,7 @@ class ClipLane:
                 "clips": [self._summary(c) for c in self.library.clips()],
                 "errors": dict(self.library.errors),
                 "user_dir": str(self.library.user_dir),
-                "playing": getattr(self.controller, "clips", None) is not None,
+                "playing": player_of(self.controller) is not None,
             }
 
         return web.json_response(await self._blocking(work))
@@ -260,7 +262,7 @@ class ClipLane:
     async def playing(self, request: web.Request) -> web.StreamResponse:
         raw = request.query.get("channel", "")
         channel = self._channel(int(raw) if raw.isdigit() and len(raw) < 4 else raw)
-        player = getattr(self.controller, "clips", None)
+        player = player_of(self.controller)
         now = None if player is None else player.playing(channel)
         if now is None:
             return web.json_response({"channel": channel + 1, "playing": None})
