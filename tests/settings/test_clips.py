@@ -408,3 +408,21 @@ def test_hot_reload_edit_break_fix_add_delete(dirs, caplog):
 def test_watcher_interval_is_checked():
     with pytest.raises(ClipError, match=r"watch interval 0 s is outside the allowed range \(0, 10\] s"):
         ClipWatcher(ClipLibrary(None, None), lambda name: None, interval_s=0)
+
+
+def test_a_folder_of_exactly_the_file_cap_is_not_reported(tmp_path, monkeypatch, caplog):
+    import vibsynth.settings.library as vl
+
+    monkeypatch.setattr(vl, "MAX_FILES_PER_FOLDER", 3)
+    for i in range(3):
+        (tmp_path / f"c{i}.yaml").write_text(one(0.1 * i))
+    with caplog.at_level(logging.WARNING, logger="vibsynth.settings"):
+        lib = ClipLibrary(None, tmp_path)
+        assert len(lib) == 3 and "clip files" not in caplog.text
+        (tmp_path / "c3.yaml").write_text(one(0.5))
+        lib.reload()
+        lib.reload()
+    assert len(lib) == 3
+    assert [r.getMessage() for r in caplog.records] == [
+        f"clip folder {tmp_path}: more than 3 clip files; only 3 are used"
+    ]

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import json
 import os
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -117,17 +117,19 @@ class _Control:
 
     default: float
     sources: list[tuple[float, list[float], list[float]]] = field(default_factory=list)  # (start, times, values)
+    starts: list[float] = field(default_factory=list)  # the sources' starts, once frozen
 
     def add(self, start: float, times: list[float], values: list[float]) -> None:
         self.sources.append((_snap(start), [_snap(t) for t in times], values))
 
     def freeze(self) -> None:
+        """Order the sources (before any :meth:`value`)."""
         self.sources.sort(key=lambda s: s[0])  # stable: at equal starts the later entry of the file wins
+        self.starts = [s[0] for s in self.sources]
 
     def value(self, t: float, *, left: bool = False) -> float:
         """The control at ``t`` (``left``: just before ``t``, excluding a source starting at ``t``)."""
-        starts = [s[0] for s in self.sources]
-        k = (bisect_right(starts, t) if not left else _bisect_left(starts, t)) - 1
+        k = (bisect_left(self.starts, t) if left else bisect_right(self.starts, t)) - 1
         if k < 0:
             return self.default
         _, times, values = self.sources[k]
@@ -147,17 +149,6 @@ class _Control:
 def _snap(t: float) -> float:
     """Times to 0.1 us: ``Time + point Time`` sums that should meet (curves split in a row) do."""
     return round(t, 7)
-
-
-def _bisect_left(xs: Sequence[float], x: float) -> int:
-    lo, hi = 0, len(xs)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if xs[mid] < x:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
 
 
 @dataclass(frozen=True)
@@ -283,8 +274,13 @@ def _design(events: list[_Event], taps: list[Tap], ic: _Control, sc: _Control, r
     segments: list[Segment] = []
     sharp = 0.5
     by_start = sorted(events, key=lambda e: e.t0)
-    for a, b in zip(edges, edges[1:]):
-        active = [e for e in by_start if e.t0 <= a and e.t1 >= b]
+    active: list[_Event] = []
+    k = 0
+    for a, b in zip(edges, edges[1:]):  # sweep: every event start and end is an edge
+        while k < len(by_start) and by_start[k].t0 <= a:
+            active.append(by_start[k])
+            k += 1
+        active = [e for e in active if e.t1 > a]
         if not active:
             segments.append(Segment(a, b, 0.0, 0.0, sharp, sharp))
             continue

@@ -21,7 +21,7 @@ ends at the last breakpoint of either envelope.
 from __future__ import annotations
 
 import os
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from pathlib import Path
 from typing import Any
 
@@ -77,13 +77,12 @@ def _envelope(r: JsonFields, raw: Any, path: JsonPath, key: str, taps: list[Tap]
     return points
 
 
-def _at(points: list[tuple[float, float]], t: float, *, left: bool, before: float | None) -> float:
-    """An envelope at ``t`` (``left``: the limit from the left at a step); ``before`` = value before the first point."""
-    times = [p[0] for p in points]
-    k = bisect_right(times, t) - 1
-    if left:
-        while k >= 0 and times[k] >= t:
-            k -= 1
+def _at(points: list[tuple[float, float]], times: list[float], t: float, *, left: bool, before: float | None) -> float:
+    """An envelope at ``t`` (``left``: the limit from the left at a step); ``before`` = value before the first point.
+
+    ``times`` are the points' times (given once: a lookup is a bisection).
+    """
+    k = (bisect_left(times, t) if left else bisect_right(times, t)) - 1
     if k < 0:
         return points[0][1] if before is None else before
     if k == len(points) - 1:
@@ -114,14 +113,15 @@ def _from_data(data: Any, origin: str) -> HapticDesign:
         raise r.fail(path, f"more than {MAX_BREAKPOINTS:,} breakpoints; not a clip vibsynth reads")
     duration = max(amplitude[-1][0], frequency[-1][0] if "frequency" in envelopes else 0.0)
     edges = sorted({0.0, duration, *(t for t, _ in amplitude), *(t for t, _ in frequency if t < duration)})
+    at, ft = [t for t, _ in amplitude], [t for t, _ in frequency]
     segments = [
         Segment(
             a,
             b,
-            _at(amplitude, a, left=False, before=0.0),
-            _at(amplitude, b, left=True, before=0.0),
-            _at(frequency, a, left=False, before=None),
-            _at(frequency, b, left=True, before=None),
+            _at(amplitude, at, a, left=False, before=0.0),
+            _at(amplitude, at, b, left=True, before=0.0),
+            _at(frequency, ft, a, left=False, before=None),
+            _at(frequency, ft, b, left=True, before=None),
         )
         for a, b in zip(edges, edges[1:])
     ]

@@ -216,6 +216,7 @@ class FileLibrary(Generic[T]):
         key = f"folder:{folder}"
         found: dict[Path, Signature] = {}
         entries = 0
+        too_many = False
         try:
             with os.scandir(folder) as handle:
                 for entry in handle:
@@ -248,8 +249,7 @@ class FileLibrary(Generic[T]):
                     self._resolve(f"stat:{path}")
                     if not stat.S_ISREG(info.st_mode):
                         continue
-                    found[path] = (info.st_mtime_ns, info.st_size, info.st_ino)
-                    if len(found) >= MAX_FILES_PER_FOLDER:
+                    if len(found) >= MAX_FILES_PER_FOLDER:  # one more than the cap: say so, use the cap
                         self._report(
                             f"files:{folder}",
                             "many",
@@ -257,7 +257,9 @@ class FileLibrary(Generic[T]):
                             f"{noun} folder {folder}: more than {MAX_FILES_PER_FOLDER} {noun} files; "
                             f"only {MAX_FILES_PER_FOLDER} are used",
                         )
+                        too_many = True
                         break
+                    found[path] = (info.st_mtime_ns, info.st_size, info.st_ino)
         except FileNotFoundError:  # no folder is no files (the user folder need not exist)
             self._resolve(key, f"{noun} folder {folder}: gone; no {noun}s from it")
             return {}
@@ -273,7 +275,7 @@ class FileLibrary(Generic[T]):
         self._resolve(key, f"{noun} folder {folder}: can be listed again")
         if entries <= MAX_ENTRIES_PER_FOLDER:
             self._reported.pop(f"entries:{folder}", None)
-        if len(found) < MAX_FILES_PER_FOLDER:
+        if not too_many:
             self._reported.pop(f"files:{folder}", None)
         return found
 
