@@ -67,6 +67,10 @@ def _json_db(values: NDArray[np.float64] | None) -> list[float | None] | None:
     return [round(float(v), 2) if math.isfinite(v) and v > SILENCE_DB else None for v in values]
 
 
+class _Settling(Exception):
+    """The output window still holds audio from before the last knob move: no measurement yet."""
+
+
 class SpectrumModel:
     """Target and measured 30-band spectra of an engine's channels.
 
@@ -169,7 +173,8 @@ class SpectrumPanel:
         self._thread: threading.Thread | None = None
         self._watched: frozenset[int] = frozenset()
         self._last_knobs: dict[int, tuple[float, float]] = {}
-        self._averages: dict[int, tuple[tuple[float, float, bool], int, NDArray[np.float64]]] = {}
+        # channel -> (knobs measured, measurements averaged, mean band powers, monotonic time the window is clean)
+        self._averages: dict[int, tuple[tuple[float, float, bool], int, NDArray[np.float64], float]] = {}
         self._last_measure = 0.0
         self.computed = 0
         server.on_pages_changed(self._pages_changed)
@@ -196,7 +201,13 @@ class SpectrumPanel:
         silent = intensity <= 0.0
         target = None if silent else model.target_db(intensity, balance)
         mean = None if silent else model.mean_db(intensity)
-        measured = self._measure(channel) if measure else None
+        settling = False
+        measured = None
+        if measure:
+            try:
+                measured = self._measure(channel)
+            except _Settling:
+                settling = True
         low, high = model.y_range_db()
         self.computed += 1
         return {
@@ -210,13 +221,18 @@ class SpectrumPanel:
             "mean_db": _json_db(mean),
             "measured_db": _json_db(measured),
             "measured": measure and measured is not None,
+            "settling": settling,
             "tap": callable(getattr(self.server.controller.engine, "read_output", None)),
             "intensity_band_hz": list(INTENSITY_BAND_HZ),
             "y_range_db": [low, high],
         }
 
     def _measure(self, channel: int) -> NDArray[np.float64] | None:
-        """Band levels (dB) of the channel's newest output, averaged while its knobs stay where they are."""
+        """Band levels (dB) of the channel's newest output, averaged while its knobs stay where they are.
+
+        Raises :class:`_Settling` while the analysis window still holds audio from before the
+        last knob move (the window's length plus the glide): the page keeps its last curve.
+        """
         engine = self.server.controller.engine
         read = getattr(engine, "read_output", None)
         if not callable(read):
@@ -234,13 +250,19 @@ class SpectrumPanel:
             return None
         state = self.server.controller.state()[channel]
         knobs = (float(state.intensity), float(state.balance), bool(state.muted))
+        now = time.monotonic()
         previous = self._averages.get(channel)
         if previous is None or previous[0] != knobs:
-            count, mean = 1, powers
-        else:
-            count = min(previous[1] + 1, AVERAGE_OVER)
-            mean = previous[2] + (powers - previous[2]) / count
-        self._averages[channel] = (knobs, count, mean)
+            # The window still holds what played before the move (and its glide): wait until it does not.
+            settle = frames / self.model.fs + float(state.glide_s)
+            self._averages[channel] = (knobs, 0, np.zeros_like(powers), now + settle)
+            raise _Settling
+        _, count, mean, settled_at = previous
+        if now < settled_at:
+            raise _Settling
+        count = min(count + 1, AVERAGE_OVER)
+        mean = mean + (powers - mean) / count
+        self._averages[channel] = (knobs, count, mean, settled_at)
         return to_db(mean)
 
     # ------------------------------------------------------------------ the worker
@@ -294,7 +316,7 @@ class SpectrumPanel:
                 continue
             self._last_knobs[channel] = knobs
             message = self.spectrum(channel, measure=measure)
-            if not measure:  # a knob moved between measurements: keep the last measured curve on the page
+            if not measure or message["settling"]:  # keep the last measured curve on the page meanwhile
                 message.pop("measured_db")
                 message.pop("measured")
             self.server.post(("spectrum", channel), message)

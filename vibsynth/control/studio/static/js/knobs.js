@@ -132,7 +132,11 @@ export function mountKnobs(studio) {
     }
   });
 
-  studio.on("error", (m) => showError(m.message));
+  studio.on("error", (m) => {
+    // learn and audition answers are shown by their own panels
+    if (typeof m.id === "string" && (m.id.startsWith("learn-") || m.id.startsWith("audition-"))) return;
+    showError(m.message);
+  });
 
   // ------------------------------------------------------------------ local input
   select.addEventListener("change", () => {

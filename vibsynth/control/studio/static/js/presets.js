@@ -39,7 +39,7 @@ export function mountPresets(studio) {
     fieldsBox.replaceChildren();
     for (const field of schema) {
       if (field.key === "name") {
-        nameHelp.textContent = `${field.help}; ${field.allowed}`;
+        nameHelp.textContent = `the user preset's name (its file name): ${field.allowed}`;
         saveName.maxLength = 64;
         continue;
       }

@@ -23,8 +23,9 @@ export function mountRecording(studio) {
   function show(result) {
     current = result;
     analysis.hidden = false;
-    plot.hidden = false;
+    plot.removeAttribute("hidden"); // an SVG element has no .hidden property
     make.hidden = false;
+    $("recording-legend").hidden = false;
     const outside = result.intensity_in_range ? "" : " (outside 0..1: clamped in a preset)";
     $("recording-intensity").textContent = formatIntensity(result.intensity) + outside;
     $("recording-intensity").dataset.value = String(result.intensity);

@@ -1,0 +1,230 @@
+"""A real ``vibsynth serve`` with its studio, and a headless Chromium driven by Selenium (e2e tests, benchmarks).
+
+Chromium and chromedriver are Debian's (``scripts/setup.sh --test`` installs them):
+``/usr/bin/chromium`` and ``/usr/bin/chromedriver``. Every wait is an explicit wait on a
+condition with a deadline (:func:`wait_for`), never a sleep.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import secrets
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from tests.e2e.oscclient import OscClient, free_udp_port
+
+ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM = os.environ.get("VIBSYNTH_CHROMIUM", "/usr/bin/chromium")
+CHROMEDRIVER = os.environ.get("VIBSYNTH_CHROMEDRIVER", "/usr/bin/chromedriver")
+START_TIMEOUT_S = 180.0
+
+T = TypeVar("T")
+
+
+def browser_available() -> tuple[bool, str]:
+    """(usable, reason): Chromium, chromedriver and Selenium are installed."""
+    for path in (CHROMIUM, CHROMEDRIVER):
+        if not (Path(path).is_file() or shutil.which(path)):
+            return False, f"{path} is missing (scripts/setup.sh --test installs chromium and chromium-driver)"
+    try:
+        import selenium  # noqa: F401
+    except ImportError:
+        return False, "selenium is not installed (pip install -e '.[test]')"
+    return True, ""
+
+
+def wait_for(condition: Callable[[], T], *, timeout: float = 15.0, what: str = "a condition") -> T:
+    """Poll ``condition`` until it returns something truthy (returned) or raise after ``timeout`` s.
+
+    Exceptions raised by ``condition`` count as "not yet" (the page may be mid-update); the
+    last one is shown when the deadline passes.
+    """
+    deadline = time.monotonic() + timeout
+    last: BaseException | None = None
+    while True:
+        try:
+            value = condition()
+            if value:
+                return value
+        except Exception as exc:  # noqa: BLE001 - not ready yet
+            last = exc
+        if time.monotonic() > deadline:
+            raise AssertionError(
+                f"timed out after {timeout:g} s waiting for {what}" + (f" (last: {last!r})" if last else "")
+            )
+        time.sleep(0.02)
+
+
+@dataclass
+class Served:
+    """A running ``vibsynth serve`` with its studio."""
+
+    proc: subprocess.Popen[bytes]
+    osc_port: int
+    url: str
+    token: str
+    log: Path
+    user_dir: Path
+    osc: OscClient = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.osc = OscClient(self.osc_port)
+
+    @property
+    def base(self) -> str:
+        """``http://127.0.0.1:PORT`` (no token)."""
+        return self.url.split("/?", 1)[0]
+
+    def get(self, name: str, channel: int = 1) -> Any:
+        """A knob of a channel as the engine's controller holds it (OSC ``get``)."""
+        msg = self.osc.request(f"/vibsynth/ch/{channel}/get", name, expect=f"/vibsynth/ch/{channel}/{name}")
+        return msg.args[0]
+
+    def api(self, path: str, method: str = "GET", body: Any = None) -> Any:
+        """A studio API call with the token as a Bearer header (a script, not the browser)."""
+        import urllib.request
+
+        data = None if body is None else json.dumps(body).encode()
+        request = urllib.request.Request(
+            self.base + path,
+            data=data,
+            method=method,
+            headers={"Authorization": f"Bearer {self.token}", "Content-Type": "application/json"},
+        )
+        with urllib.request.urlopen(request, timeout=10) as response:
+            return json.loads(response.read())
+
+    def stop(self) -> None:
+        self.osc.close()
+        self.proc.terminate()
+        try:
+            self.proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def start_serve(folder: Path, *extra: str, channels: int = 2, output: str = "null") -> Served:
+    """Start ``vibsynth serve`` (null output by default) with a private user preset folder and config."""
+    folder.mkdir(parents=True, exist_ok=True)
+    port = free_udp_port()
+    token = secrets.token_urlsafe(24)
+    user_dir = folder / "presets"
+    config = folder / "vibsynth.yaml"
+    config.write_text(
+        f"version: 1\nosc:\n  port: {port}\npresets:\n  user_dir: {json.dumps(str(user_dir))}\n  watch: true\n",
+        encoding="utf-8",
+    )
+    log_path = folder / "serve.log"
+    env = dict(
+        os.environ,
+        PYTHONPATH=str(ROOT),
+        XDG_CONFIG_HOME=str(folder / "xdg-config"),
+        XDG_DATA_HOME=str(folder / "xdg-data"),
+        VIBSYNTH_HOST_API="JACK",
+        JACK_NO_AUDIO_RESERVATION="1",
+    )
+    env.pop("VIBSYNTH_STUDIO_TOKEN", None)
+    cmd = [
+        sys.executable,
+        "-m",
+        "vibsynth",
+        "serve",
+        "--config",
+        str(config),
+        "--output",
+        output,
+        "--channels",
+        str(channels),
+        "--no-midi",
+        "--osc-port",
+        str(port),
+        "--studio-port",
+        "0",
+        "--studio-token",
+        token,
+        *extra,
+    ]
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+
+    def studio_line() -> str | None:
+        if proc.poll() is not None:
+            raise RuntimeError(f"serve exited ({proc.returncode}):\n{log_path.read_text()}")
+        found = re.search(r"^studio: (http://\S+)$", log_path.read_text(), re.M)
+        return found.group(1) if found else None
+
+    try:
+        url = wait_for(studio_line, timeout=START_TIMEOUT_S, what="the studio: line of vibsynth serve")
+    except (AssertionError, RuntimeError) as exc:
+        proc.kill()
+        proc.wait()
+        raise AssertionError(f"{exc}\n{log_path.read_text()}") from None
+    served = Served(proc, port, url, token, log_path, user_dir)
+    wait_for(lambda: served.get("intensity") is not None, timeout=30, what="OSC answers")
+    return served
+
+
+def chromium(width: int = 1400, height: int = 1250) -> Any:
+    """A headless Chromium (Selenium WebDriver) with its console log kept."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.options import Options
+    from selenium.webdriver.chrome.service import Service
+
+    options = Options()
+    options.binary_location = CHROMIUM
+    for arg in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--no-first-run",
+        "--disable-background-networking",
+        f"--window-size={width},{height}",
+    ):
+        options.add_argument(arg)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+
+
+def by_testid(driver: Any, testid: str) -> Any:
+    from selenium.webdriver.common.by import By
+
+    return driver.find_element(By.CSS_SELECTOR, f'[data-testid="{testid}"]')
+
+
+def all_by_testid(driver: Any, testid: str) -> list[Any]:
+    from selenium.webdriver.common.by import By
+
+    return driver.find_elements(By.CSS_SELECTOR, f'[data-testid="{testid}"]')
+
+
+def open_studio(driver: Any, served: Served) -> None:
+    """Load the page with the token (it becomes a cookie) and wait until the page is live."""
+    from selenium.webdriver.common.by import By
+
+    driver.get(served.url)
+    wait_for(lambda: driver.current_url.rstrip("/") == served.base, what="the redirect to the bare URL")
+    wait_for(
+        lambda: driver.find_element(By.ID, "connection").get_attribute("data-state") == "open",
+        what="the WebSocket to open",
+    )
+    wait_for(lambda: by_testid(driver, "channel").get_attribute("value") == "1", what="the hello message")
+
+
+def console_errors(driver: Any) -> list[str]:
+    """Script errors of the page's console (refused requests the test provokes are network entries, not these)."""
+    return [
+        entry["message"]
+        for entry in driver.get_log("browser")
+        if entry["level"] == "SEVERE" and entry.get("source") != "network"
+    ]
