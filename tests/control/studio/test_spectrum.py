@@ -46,6 +46,16 @@ def test_the_engines_output_measures_as_the_target(model):
     assert model.measured_db(np.zeros(100)) is None  # too short to measure the 10 Hz band
 
 
+def test_measured_band_powers_are_the_filter_banks(model, rng):
+    """The panel keeps the filters' responses between measurements: the same numbers as band_powers."""
+    from vibsynth.dsp.filterbank import band_powers
+
+    for n in (32768, 32768, 20000):
+        x = rng.standard_normal(n)
+        expected = band_powers(x, fs=FS, centres=model.basis.centres_hz, order=model.basis.filter_order)
+        assert np.allclose(model.measured_powers(x), expected, rtol=1e-10, atol=0)
+
+
 class TappedEngine(FakeEngine):
     """A fake engine whose output tap plays a real render of whatever the controller last asked."""
 

@@ -11,7 +11,9 @@
 * **mean**: ``M`` at the same level, for reference.
 * **measured**: the newest second of the engine's output on that channel
   (``engine.read_output``), through the same 30-band filter bank as ``vibsynth analyze``
-  (:func:`~vibsynth.dsp.filterbank.band_powers`).
+  (:func:`~vibsynth.dsp.filterbank.bin_powers` and
+  :func:`~vibsynth.dsp.filterbank.bandpass_response`, as :func:`~vibsynth.dsp.filterbank.band_powers`
+  combines them; the responses are kept for the window length).
 
 A worker thread computes them a few times a second, only while a page is open, for the
 channels the open pages watch, and pushes ``{"type": "spectrum", ...}``; ``GET
@@ -33,7 +35,7 @@ from aiohttp import web
 from numpy.typing import NDArray
 
 from vibsynth.dsp.basis import Basis, to_db
-from vibsynth.dsp.filterbank import band_powers
+from vibsynth.dsp.filterbank import bandpass_response, bin_powers
 from vibsynth.dsp.intensity import INTENSITY_BAND_HZ, SILENCE_DB, knob_to_level_db
 from vibsynth.dsp.synthesis import SpectralShaper
 from vibsynth.engine.engine import TAP_MAX_FRAMES
@@ -91,6 +93,7 @@ class SpectrumModel:
         self.range_db = float(range_db)
         self._shaper: SpectralShaper | None = None
         self._shapes: OrderedDict[int, NDArray[np.float64]] = OrderedDict()
+        self._responses: dict[int, NDArray[np.float64]] = {}
         self._lock = threading.Lock()
 
     @property
@@ -145,9 +148,18 @@ class SpectrumModel:
         if x.size < int(MIN_MEASURE_SECONDS * self.fs):
             return None
         try:
-            return band_powers(x, fs=self.fs, centres=self.basis.centres_hz, order=self.basis.filter_order)
+            freqs, power = bin_powers(x, fs=self.fs)
         except ParameterError:
             return None
+        # band_powers' sum of bin power x |H_k|^2, with the filters' responses on these bins computed
+        # once per window length (42 ms of work that would otherwise hold the GIL every measurement)
+        response = self._responses.get(freqs.size)
+        if response is None:
+            response = np.ascontiguousarray(
+                bandpass_response(freqs, centres=self.basis.centres_hz, order=self.basis.filter_order)
+            )
+            self._responses = {freqs.size: response}
+        return np.asarray(response @ power, dtype=np.float64)
 
     def y_range_db(self) -> tuple[float, float]:
         """A fixed dB axis covering every intensity: from 40 dB below the quietest level to 25 dB above the ceiling."""
