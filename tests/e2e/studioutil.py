@@ -13,19 +13,17 @@ import re
 import secrets
 import shutil
 import subprocess
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
-from tests.e2e.oscclient import OscClient, free_udp_port
+from tests.e2e.oscclient import OscClient
 
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = os.environ.get("VIBSYNTH_CHROMIUM", "/usr/bin/chromium")
 CHROMEDRIVER = os.environ.get("VIBSYNTH_CHROMEDRIVER", "/usr/bin/chromedriver")
-START_TIMEOUT_S = 180.0
 
 T = TypeVar("T")
 
@@ -104,74 +102,49 @@ class Served:
             return json.loads(response.read())
 
     def stop(self) -> None:
+        from tests.e2e.test_osc_e2e import stop_serve
+
         self.osc.close()
-        self.proc.terminate()
-        try:
-            self.proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+        stop_serve(self.proc)
 
 
-def start_serve(folder: Path, *extra: str, channels: int = 2, output: str = "null") -> Served:
-    """Start ``vibsynth serve`` (null output by default) with a private user preset folder and config."""
+def start_serve(folder: Path, *, channels: int = 2, output: str = "null") -> Served:
+    """Start ``vibsynth serve`` (null output by default) with a private user preset folder and config.
+
+    The OSC tests' starter (:func:`tests.e2e.test_osc_e2e.start_serve`) with the studio on a free
+    port, a token of its own, and ready once the ``studio:`` line is printed and OSC answers.
+    """
+    from tests.e2e.test_osc_e2e import _socket_ready
+    from tests.e2e.test_osc_e2e import start_serve as start_osc_serve
+
     folder.mkdir(parents=True, exist_ok=True)
-    port = free_udp_port()
     token = secrets.token_urlsafe(24)
     user_dir = folder / "presets"
-    config = folder / "vibsynth.yaml"
-    config.write_text(
-        f"version: 1\nosc:\n  port: {port}\npresets:\n  user_dir: {json.dumps(str(user_dir))}\n  watch: true\n",
-        encoding="utf-8",
+    extra = (
+        f"audio:\n  channels: {channels}\n"
+        f"presets:\n  user_dir: {json.dumps(str(user_dir))}\n  watch: true\n"
+        "studio:\n  port: 0\n"
     )
-    log_path = folder / "serve.log"
     env = dict(
         os.environ,
-        PYTHONPATH=str(ROOT),
         XDG_CONFIG_HOME=str(folder / "xdg-config"),
         XDG_DATA_HOME=str(folder / "xdg-data"),
         VIBSYNTH_HOST_API="JACK",
         JACK_NO_AUDIO_RESERVATION="1",
+        VIBSYNTH_STUDIO_TOKEN=token,
     )
-    env.pop("VIBSYNTH_STUDIO_TOKEN", None)
-    cmd = [
-        sys.executable,
-        "-m",
-        "vibsynth",
-        "serve",
-        "--config",
-        str(config),
-        "--output",
-        output,
-        "--channels",
-        str(channels),
-        "--no-midi",
-        "--osc-port",
-        str(port),
-        "--studio-port",
-        "0",
-        "--studio-token",
-        token,
-        *extra,
-    ]
-    with open(log_path, "w") as log:
-        proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+    log_path = folder / "serve.log"
 
     def studio_line() -> str | None:
-        if proc.poll() is not None:
-            raise RuntimeError(f"serve exited ({proc.returncode}):\n{log_path.read_text()}")
-        found = re.search(r"^studio: (http://\S+)$", log_path.read_text(), re.M)
+        found = re.search(r"^studio: (http://\S+)$", log_path.read_text(), re.M) if log_path.exists() else None
         return found.group(1) if found else None
 
-    try:
-        url = wait_for(studio_line, timeout=START_TIMEOUT_S, what="the studio: line of vibsynth serve")
-    except (AssertionError, RuntimeError) as exc:
-        proc.kill()
-        proc.wait()
-        raise AssertionError(f"{exc}\n{log_path.read_text()}") from None
-    served = Served(proc, port, url, token, log_path, user_dir)
-    wait_for(lambda: served.get("intensity") is not None, timeout=30, what="OSC answers")
-    return served
+    proc, port = start_osc_serve(
+        folder, output=output, extra_config=extra, env=env, ready=lambda p: bool(studio_line()) and _socket_ready(p)
+    )
+    url = studio_line()
+    assert url is not None and url.endswith(f"?token={token}")
+    return Served(proc, port, url, token, log_path, user_dir)
 
 
 def chromium(width: int = 1400, height: int = 1250) -> Any:
