@@ -201,6 +201,34 @@ def test_commands_after_a_flood_keep_their_order(studio, controller):
     assert two.balance == -2.0  # after the last texture's 0.5
 
 
+def test_a_panic_is_never_refused_for_the_budget(studio, controller, monkeypatch):
+    """The budget never refills (a frozen clock): mutes over it are refused, a panic still lands."""
+    import vibsynth.control.studio.server as server_module
+    from vibsynth.control.studio.commands import Throttle
+
+    monkeypatch.setattr(server_module, "Throttle", lambda **kw: Throttle(clock=lambda: 0.0, **kw))
+    budget = int(Throttle().burst)
+    controller.set_knob("intensity", 0.8, channels=[0, 1])
+
+    async def scenario():
+        async with aiohttp.ClientSession() as session:
+            ws = await connect(session, studio)
+            await receive_until(ws, is_type("hello"))
+            for n in range(budget):
+                await ws.send_json({"type": "mute", "channel": 1, "value": False, "id": n})
+            await ws.send_json({"type": "mute", "channel": 1, "value": True, "id": "over"})
+            refused = await receive_until(ws, is_type("error", id="over"), timeout=30)
+            await ws.send_json({"type": "panic", "id": "panic"})
+            await receive_until(ws, is_type("ack", id="panic"), timeout=30)
+            await ws.close()
+            return refused
+
+    refused = run(scenario())
+    assert "too many messages" in refused["message"]
+    assert not controller.state()[0].muted  # the refused mute changed nothing
+    assert all(s.intensity == 0.0 for s in controller.state())  # the panic landed
+
+
 def test_pushes_to_a_page_coalesce_under_an_osc_rate_flood(studio, controller):
     """100,000 moves from another thread: the page gets the final values, in far fewer messages."""
     count = 100_000

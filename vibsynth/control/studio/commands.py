@@ -41,6 +41,7 @@ __all__ = [
     "Command",
     "Throttle",
     "apply_command",
+    "ALWAYS",
 ]
 
 #: Longest WebSocket message a page may send.
@@ -49,6 +50,9 @@ MAX_MESSAGE_BYTES = 4096
 SOURCE = "studio"
 #: Knob moves that can wait for the budget (the newest per key is applied); the rest need it now.
 COALESCED = frozenset({"knob", "texture", "glide"})
+#: Messages never refused for the budget: a panic must silence the actuators whatever the page
+#: sent before it. Bounded all the same: a panic's cost does not grow with anything a page sends.
+ALWAYS = frozenset({"panic"})
 KNOBS = ("intensity", "balance")
 
 

@@ -35,6 +35,7 @@ from aiohttp import WSCloseCode, WSMsgType, web
 
 from vibsynth.control.controller import Controller, KnobEvent
 from vibsynth.control.studio.commands import (
+    ALWAYS,
     COALESCED,
     MAX_MESSAGE_BYTES,
     Command,
@@ -455,7 +456,7 @@ class _Session:
                 loop = asyncio.get_running_loop()
                 self.flush_handle = loop.call_later(self.throttle.wait_s(), self.flush)
             return
-        if command.type not in COALESCED and not self.throttle.take():
+        if command.type not in COALESCED and not self.throttle.take() and command.type not in ALWAYS:
             assert server.gate is not None
             server.gate.count("flood")
             self.refuse(MessageError("too many messages: slow down"), command.id, count=False)
