@@ -204,7 +204,9 @@ def main() -> int:
         "clock_offset_ms": round(offset, 3),
         "input_to_engine": _stats(engine_ms),
         "osc_to_page": _stats(page_ms),
-        "machine": f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
+        "machine": (
+            f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
+        ),
         "browser": "headless Chromium (Selenium)",
         "date": time.strftime("%Y-%m-%d"),
     }
