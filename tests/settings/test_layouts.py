@@ -159,6 +159,7 @@ def test_sources_defaults_and_rolloff_names():
         ("sources:\n  midi:\n    - {source: 17, x: {cc: 20}}\n", "sources.midi[0].source = 17: outside the allowed"),
         ("sources:\n  midi:\n    - {source: 1, x: {cc: 123}}\n", "sources.midi[0].x.cc = 123: outside the allowed"),
         ("sources:\n  midi:\n    - {source: 1}\n", "item 0: binds no coordinate (give x, y or z)"),
+        ("sources:\n  midi:\n    - {source: 1, y: {cc: 6}}\n", "item 0: y.cc 6 is reserved for NRPN/RPN data"),
         (
             "sources:\n  midi:\n    - {source: 1, x: {cc: 20, range: [0.1, 0.1]}}\n",
             "item 0: x.range [0.1, 0.1] must span some distance",

@@ -32,6 +32,8 @@ ROLLOFF_NAMES = ("linear", "smooth", "inverse-square", "phantom")
 POSITION_LIMIT_M = 10.0
 
 _AXES = ("x", "y", "z")
+#: Controllers that carry NRPN/RPN data (6, 38, 96-101): never bound (as for the knobs).
+_RESERVED_CCS = frozenset({6, 38, 96, 97, 98, 99, 100, 101})
 
 
 class PositionCc(ValueModel):
@@ -69,6 +71,8 @@ def _check_source_midi(value: Any) -> Any:
             binding = item.get(axis)
             if not isinstance(binding, dict) or not is_int(binding.get("cc")):
                 continue
+            if binding["cc"] in _RESERVED_CCS:
+                raise problem(f"item {i}: {axis}.cc {binding['cc']} is reserved for NRPN/RPN data", i, axis)
             key = (binding["cc"], binding.get("channel"))
             here = f"source {item.get('source')} {axis}"
             if key in used:

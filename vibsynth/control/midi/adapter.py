@@ -14,6 +14,7 @@ from vibsynth.control.midi.bindings import KNOBS, MidiSettings, check_learn_knob
 from vibsynth.control.midi.learn_store import user_config_path
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import VIRTUAL_PORT_NAME, MidiServer, _one_line, resolve_port_name, running_servers
+from vibsynth.control.spatial.midi import PositionControllers
 from vibsynth.errors import DeviceError
 from vibsynth.settings.cli_args import flag_type
 from vibsynth.settings.config import settings_of
@@ -102,6 +103,7 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
             log.warning("running without MIDI: %s. %s", exc, port_help())
             return None
     mapper = MidiMapper(controller, settings, presets=presets)
+    mapper.positions = PositionControllers.from_config(config, controller)  # sources.midi
     server = MidiServer(
         mapper,
         port=port,

@@ -189,6 +189,9 @@ class MidiMapper:
         self._learn: str | None = None
         self._on_learned: LearnCallback | None = None
         self.set_bindings(settings.bindings)
+        #: Controllers bound to source coordinates (control/spatial/midi.py), offered every CC first
+        #: (before the channel map and MIDI learn).
+        self.positions: Any = None
 
     # ------------------------------------------------------------------ bindings and learn
     @property
@@ -275,6 +278,9 @@ class MidiMapper:
             if channel is None:
                 self._reject("midi_unknown")
                 return False
+            if kind == "control_change" and self.positions is not None:  # source coordinates: any MIDI channel
+                if self.positions.handle(channel, msg.control, msg.value, at_frame):
+                    return True
             acts = self.settings.channel_map.get(channel)
             if acts is None:
                 self._reject("midi_unmapped_channel")
