@@ -43,6 +43,7 @@ from vibsynth.control.osc.codec import encode_message  # noqa: E402
 from vibsynth.control.osc.handler import OscHandler  # noqa: E402
 from vibsynth.control.spatial.adapter import build_mixer  # noqa: E402
 from vibsynth.control.spatial.sources import SourceView  # noqa: E402
+from vibsynth.formats.files import atomic_write_text  # noqa: E402
 from vibsynth.settings.config import load_config  # noqa: E402
 from vibsynth.settings.layouts import Layout, load_layout  # noqa: E402
 from vibsynth.settings.models_config import ChannelPosition  # noqa: E402
@@ -231,9 +232,8 @@ def main() -> int:
     print(
         f"\npos flood: {f['messages']} messages in {f['seconds']:.2f} s ({f['per_second']:.0f}/s), {f['mixes']} mixes"
     )
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2), encoding="utf-8")
-    print(f"\nJSON: {args.json}")
+    atomic_write_text(args.json, json.dumps(result, indent=2))  # the folder is part of the repository
+    print(f"\nJSON written to {args.json}")
     return 0
 
 
