@@ -13,6 +13,11 @@ sample (the move is complete: channel 1 released and faded out). Once with the d
 position glide (``sources.glide_ms: 20``) and once with 0 (a jump; the channels still glide
 over one mix period, ``sources.update_ms: 10``, so there is no click).
 
+The times rest on JACK's frame clock (``frame_time`` at the send, ``last_frame_time`` of the
+capture); on a loaded machine the dummy driver wakes late and that clock drifts from the wall
+clock by milliseconds, which shows as scattered (even negative) onsets: the JSON records the
+load average, and a trial is left out when its channels were not in the expected state around it.
+
 Cost (no audio): the mix of n sources (1, 4, 16) on the shipped glove (6 actuators) and vest
 (16), and a 64-actuator grid, per mix in microseconds; OSC position messages handled per second
 with a running mixer (a flood coalesces into one mix per update).
@@ -52,8 +57,8 @@ LINE = "audio:\n  channels: 4\nlayout:\n" + "".join(f"  {c + 1}: {{x: {0.1 * c:.
 SILENT = 1e-7
 
 
-def latency_trials(port: int, trials: int) -> tuple[list[float], list[float]]:
-    """(onset, done) latencies in seconds, on the JACK frame clock."""
+def latency_trials(port: int, trials: int) -> tuple[list[float], list[float], dict[str, int]]:
+    """(onset, done) latencies in seconds, on the JACK frame clock, and the trials left out (why)."""
     from tests.e2e.jackutil import JackCapture, portaudio_output_ports
 
     client = Client(port)
@@ -83,9 +88,10 @@ def latency_trials(port: int, trials: int) -> tuple[list[float], list[float]]:
     client.close()
     onsets, dones = [], []
     rejected = {"outside capture": 0, "channel 2 not silent before": 0, "no change seen": 0}
-    # JACK's frame_time is an estimate of "now" that a loaded machine can get a millisecond or
-    # two wrong: the silence before a move is checked 10-100 ms before it, and the change is
-    # looked for from 10 ms before the send (a negative latency would show such an error).
+    # JACK's frame_time is an estimate of "now" that a loaded machine can get a few milliseconds
+    # wrong: the silence before a move is checked 10-100 ms before it, and the change is looked
+    # for from 10 ms before the send (a negative latency would show such an error) to 10 ms
+    # before the move back.
     early = int(0.01 * rate)
     for sent, back in sends:
         first, window = sent - start, back - sent
@@ -95,16 +101,17 @@ def latency_trials(port: int, trials: int) -> tuple[list[float], list[float]]:
         if np.any(np.abs(data[first - 10 * early : first - early, 1]) > SILENT):
             rejected["channel 2 not silent before"] += 1  # not a clean trial
             continue
-        after2 = np.flatnonzero(np.abs(data[first - early : first + window, 1]) > SILENT)
-        after1 = np.flatnonzero(np.abs(data[first - early : first + window, 0]) > SILENT)
-        if after2.size and after1.size and after1[-1] < early + window - 1:
+        span = slice(first - early, first + window - early)  # up to 10 ms before the move back
+        after2 = np.flatnonzero(np.abs(data[span, 1]) > SILENT)
+        after1 = np.flatnonzero(np.abs(data[span, 0]) > SILENT)
+        if after2.size and after1.size and after1[-1] < window - 1:
             onsets.append((after2[0] - early) / rate)
             dones.append((after1[-1] + 1 - early) / rate)
         else:
             rejected["no change seen"] += 1
     if any(rejected.values()):
         print(f"latency trials rejected: {rejected}", file=sys.stderr)
-    return onsets, dones
+    return onsets, dones, rejected
 
 
 def latency(trials: int, glide_ms: float) -> dict:
@@ -114,7 +121,8 @@ def latency(trials: int, glide_ms: float) -> dict:
         proc, port = start_serve(Path(tmp), output="sounddevice", extra_config=extra, env=env)
         try:
             time.sleep(1.0)
-            onsets, dones = latency_trials(port, trials)
+            load_before = os.getloadavg()[0]
+            onsets, dones, rejected = latency_trials(port, trials)
         finally:
             stop_serve(proc)
 
@@ -126,7 +134,14 @@ def latency(trials: int, glide_ms: float) -> dict:
             "max_ms": max(ms) if ms else None,
         }
 
-    return {"glide_ms": glide_ms, "trials": len(onsets), "onset": stats(onsets), "done": stats(dones)}
+    return {
+        "glide_ms": glide_ms,
+        "trials": len(onsets),
+        "left_out": rejected,
+        "load_avg_1min": load_before,
+        "onset": stats(onsets),
+        "done": stats(dones),
+    }
 
 
 def grid(n: int) -> dict[int, ChannelPosition]:

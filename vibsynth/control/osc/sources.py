@@ -11,6 +11,7 @@ saying so.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 from vibsynth.control import spatial
 from vibsynth.control.osc.codec import Message, encode_message
@@ -19,6 +20,9 @@ from vibsynth.control.spatial.mixer import SourceMixer, Update
 from vibsynth.control.spatial.sources import SETTING_NAMES, SourceTable, SourceView
 from vibsynth.dsp.spatial import check_rolloff
 from vibsynth.errors import ParameterError, VibsynthError
+
+if TYPE_CHECKING:
+    from vibsynth.control.osc.handler import OscHandler
 
 __all__ = ["SourceMethods", "NO_LAYOUT"]
 
@@ -40,13 +44,12 @@ class SourceMethods:
         Gives the controller (to find the mixer), the prefix and the argument checks.
     """
 
-    def __init__(self, handler: object) -> None:
-        from vibsynth.control.osc import handler as module  # the argument checks live there
+    def __init__(self, handler: OscHandler) -> None:
+        from vibsynth.control.osc import handler as module  # the argument checks live there (it imports this)
 
-        self._handler = handler
         self._args = module
-        self.prefix: str = handler.prefix  # type: ignore[attr-defined]
-        self.controller = handler.controller  # type: ignore[attr-defined]
+        self.prefix = handler.prefix
+        self.controller = handler.controller
 
     def methods(self) -> dict[str, Method]:
         """``source/<method>`` -> the function the handler calls with the 0-based source indices."""

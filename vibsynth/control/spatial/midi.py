@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from vibsynth.control import spatial
+from vibsynth.control.spatial.sources import SourceTable
 from vibsynth.settings.config import settings_of
 from vibsynth.settings.models_sources import SourceMidi
 
@@ -77,9 +78,11 @@ class PositionControllers:
             self.refused += 1
             self.controller.count_error("midi_no_layout")
             return True
-        for binding in matches:
-            coordinate = binding.coordinate(value)
-            mixer.apply(
-                lambda table, t, b=binding, c=coordinate: table.set_axis(b.source, b.axis, c, t), at_frame=at_frame
-            )
+        moves = [(b.source, b.axis, b.coordinate(value)) for b in matches]
+
+        def update(table: SourceTable, t: float) -> None:
+            for source, axis, coordinate in moves:
+                table.set_axis(source, axis, coordinate, t)
+
+        mixer.apply(update, at_frame=at_frame)
         return True
