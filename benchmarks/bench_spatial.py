@@ -6,17 +6,18 @@
 Latency (needs JACK): ``vibsynth serve`` streams 4 channels on a line 10 cm apart through
 PortAudio into JACK; a JACK client records channels 1 and 2. A source (linear roll-off,
 radius 10 cm) sits on channel 1, so channel 2 is silent; each trial sends one
-``/vibsynth/source/1/pos`` to channel 2's position, noting the JACK frame clock at the send,
+``/vibsynth/source/1/pos`` to channel 2's position (noting the wall clock at the send),
 then moves it back. Measured on the captured samples: **onset**, send -> first non-zero sample
 on channel 2 (the change starts to be felt), and **done**, send -> channel 1's last non-zero
 sample (the move is complete: channel 1 released and faded out). Once with the default
 position glide (``sources.glide_ms: 20``) and once with 0 (a jump; the channels still glide
 over one mix period, ``sources.update_ms: 10``, so there is no click).
 
-The times rest on JACK's frame clock (``frame_time`` at the send, ``last_frame_time`` of the
-capture); on a loaded machine the dummy driver wakes late and that clock drifts from the wall
-clock by milliseconds, which shows as scattered (even negative) onsets: the JSON records the
-load average, and a trial is left out when its channels were not in the expected state around it.
+Times are on the wall clock: a captured sample's time is when the JACK cycle that delivered it
+ran, plus its place in the cycle (when it was rendered; a sound card plays it its output latency
+later). JACK's frame clock is not used: on a loaded machine the dummy driver runs late and that
+clock drifts from the wall clock by milliseconds. The JSON records the load average; a trial is
+left out when its channels were not in the expected state around it.
 
 Cost (no audio): the mix of n sources (1, 4, 16) on the shipped glove (6 actuators) and vest
 (16), and a 64-actuator grid, per mix in microseconds; OSC position messages handled per second
@@ -57,9 +58,35 @@ LINE = "audio:\n  channels: 4\nlayout:\n" + "".join(f"  {c + 1}: {{x: {0.1 * c:.
 SILENT = 1e-7
 
 
+def timed_capture(seconds: float, n_ports: int):
+    """A JACK capture that also notes, for every cycle, its first sample and the wall clock (monotonic) then."""
+    from tests.e2e.jackutil import JackCapture
+
+    class TimedCapture(JackCapture):
+        def __init__(self) -> None:
+            self.cycle_first: list[int] = []  # appended on JACK's thread, read after the capture
+            self.cycle_time: list[float] = []
+            super().__init__(seconds, n_ports=n_ports)
+
+        def _process(self, frames: int) -> None:
+            first = self.frames_captured
+            super()._process(frames)
+            if self.frames_captured > first:
+                self.cycle_first.append(first)
+                self.cycle_time.append(time.monotonic())
+
+    return TimedCapture()
+
+
 def latency_trials(port: int, trials: int) -> tuple[list[float], list[float], dict[str, int]]:
-    """(onset, done) latencies in seconds, on the JACK frame clock, and the trials left out (why)."""
-    from tests.e2e.jackutil import JackCapture, portaudio_output_ports
+    """(onset, done) latencies in seconds on the wall clock, and the trials left out (why).
+
+    A captured sample's time is the wall-clock time of the JACK cycle that delivered it plus its
+    place in the cycle: the moment it was rendered (a sound card plays it its output latency
+    later). JACK's own frame clock is not used: on a loaded machine the dummy driver runs late
+    and that clock drifts from the wall clock by milliseconds.
+    """
+    from tests.e2e.jackutil import portaudio_output_ports
 
     client = Client(port)
     for address, args in (
@@ -71,46 +98,52 @@ def latency_trials(port: int, trials: int) -> tuple[list[float], list[float], di
     ):
         client.send(address, *args)
     gap_s = 0.25
-    sends: list[tuple[int, int]] = []  # (frame of the move to channel 2, frame of the move back)
-    with JackCapture(trials * 2 * gap_s + 2.0, n_ports=2) as cap:
+    sends: list[tuple[float, float]] = []  # wall clock of the move to channel 2 and of the move back
+    with timed_capture(trials * 2 * gap_s + 2.0, 2) as cap:
         cap.connect(portaudio_output_ports(cap.client)[:2])
         cap.arm()
         time.sleep(0.5)
         for _ in range(trials):
-            there = cap.frame_time_now()
+            there = time.monotonic()
             client.send("/vibsynth/source/1/pos", 0.1, 0.0)
             time.sleep(gap_s)
-            sends.append((there, cap.frame_time_now()))
+            sends.append((there, time.monotonic()))
             client.send("/vibsynth/source/1/pos", 0.0, 0.0)
             time.sleep(gap_s)
         assert cap.wait(), "capture did not complete"
-        data, start, rate = cap.data.copy(), cap.start_frame, cap.rate
+        data, rate = cap.data.copy(), cap.rate
+        firsts, times = np.asarray(cap.cycle_first), np.asarray(cap.cycle_time)
     client.close()
+
+    def index_at(t: float) -> int:
+        """The first sample rendered at or after wall time t."""
+        k = int(np.searchsorted(times, t))
+        return int(firsts[k]) if k < firsts.size else data.shape[0]
+
+    def time_of(i: int) -> float:
+        k = int(np.searchsorted(firsts, i, side="right")) - 1
+        return float(times[k] + (i - firsts[k]) / rate)
+
     onsets, dones = [], []
     rejected = {"outside capture": 0, "channel 2 not silent before": 0, "no change seen": 0}
-    # JACK's frame_time is an estimate of "now" that a loaded machine can get a few milliseconds
-    # wrong: the silence before a move is checked 10-100 ms before it, and the change is looked
-    # for from 10 ms before the send (a negative latency would show such an error) to 10 ms
-    # before the move back.
-    early = int(0.01 * rate)
-    for sent, back in sends:
-        first, window = sent - start, back - sent
-        if first < 10 * early or first + window > data.shape[0]:
+    before = int(0.1 * rate)
+    for there, back in sends:
+        first, last = index_at(there), index_at(back)
+        if first < before or last >= data.shape[0]:
             rejected["outside capture"] += 1
             continue
-        if np.any(np.abs(data[first - 10 * early : first - early, 1]) > SILENT):
+        if np.any(np.abs(data[first - before : first, 1]) > SILENT):
             rejected["channel 2 not silent before"] += 1  # not a clean trial
             continue
-        span = slice(first - early, first + window - early)  # up to 10 ms before the move back
-        after2 = np.flatnonzero(np.abs(data[span, 1]) > SILENT)
-        after1 = np.flatnonzero(np.abs(data[span, 0]) > SILENT)
-        if after2.size and after1.size and after1[-1] < window - 1:
-            onsets.append((after2[0] - early) / rate)
-            dones.append((after1[-1] + 1 - early) / rate)
+        after2 = np.flatnonzero(np.abs(data[first:last, 1]) > SILENT)
+        after1 = np.flatnonzero(np.abs(data[first:last, 0]) > SILENT)
+        if after2.size and after1.size and after1[-1] < last - first - 1:
+            onsets.append(time_of(first + int(after2[0])) - there)
+            dones.append(time_of(first + int(after1[-1]) + 1) - there)
         else:
             rejected["no change seen"] += 1
     if any(rejected.values()):
-        print(f"latency trials rejected: {rejected}", file=sys.stderr)
+        print(f"latency trials left out: {rejected}", file=sys.stderr)
     return onsets, dones, rejected
 
 
