@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import heapq
 import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -12,11 +13,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vibsynth.app.render import DEFAULT_BLOCK, ArrayCollector, Cue, RenderResult, Sink, render
+from vibsynth.control.clips.player import ClipPlayer
 from vibsynth.control.midi.bindings import MidiSettings
+from vibsynth.control.midi.clipnotes import ClipNotes
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import _one_line
 from vibsynth.engine.engine import Engine
 from vibsynth.errors import InputError, ParameterError
+from vibsynth.settings.config import settings_of
 
 __all__ = ["MidiRender", "prepare_midi_render", "render_midi_file", "render_midi_to"]
 
@@ -62,8 +66,12 @@ def prepare_midi_render(
     seconds: float | None = None,
     presets: Any = None,
     engine: Engine | None = None,
+    clips: Any = None,
 ) -> MidiRender:
     """Read a MIDI file and set up the engine, controller and mapper that play it.
+
+    Notes of the ``midi_clips`` map play their clips, as ``vibsynth serve`` does (a clip
+    player on the render's controller, ticked every block).
 
     Parameters
     ----------
@@ -80,6 +88,8 @@ def prepare_midi_render(
     engine : Engine, optional
         A fresh engine to render with (tests, benchmarks); default
         ``vibsynth.app.service.build_engine(config, basis=basis)``.
+    clips : ClipLibrary, optional
+        For the clip notes (default: the config's clip library).
 
     Raises
     ------
@@ -111,7 +121,11 @@ def prepare_midi_render(
         preset_resolver=getattr(presets, "get", None),
     )
     settings = MidiSettings.from_config(data, engine.channels)
-    mapper = MidiMapper(controller, settings, presets=presets, source="midi-file")
+    player = _clip_player(config, controller, clips)
+    clip_notes = None
+    if player is not None:
+        clip_notes = ClipNotes.from_settings(settings_of(config).midi_clips, controller, player=lambda: player)
+    mapper = MidiMapper(controller, settings, presets=presets, source="midi-file", clip_notes=clip_notes)
     fs = float(engine.fs)
     if seconds is None:
         t = 0.0
@@ -121,7 +135,26 @@ def prepare_midi_render(
     frames = int(round(float(seconds) * fs))
     if frames <= 0:
         raise ParameterError(f"render length must be positive, got {seconds!r} s")
-    return MidiRender(engine, _timeline(midi_file, mapper, fs), frames)
+    timeline: Iterator[Cue] = _timeline(midi_file, mapper, fs)
+    if player is not None:  # the clip player's ticks, every block, between the messages
+        ticks = (Cue(f, _tick(player)) for f in range(0, frames, DEFAULT_BLOCK))
+        timeline = heapq.merge(timeline, ticks, key=lambda cue: cue.frame)
+    return MidiRender(engine, timeline, frames)
+
+
+def _clip_player(config: Any, controller: Any, library: Any) -> ClipPlayer | None:
+    """A clip player for the notes of ``midi_clips`` (None when the config maps no note)."""
+    if not settings_of(config).midi_clips.notes:
+        return None
+    if library is None:
+        from vibsynth.settings.clips import load_clip_library
+
+        library = load_clip_library(config if hasattr(config, "section") else None)
+    return ClipPlayer(controller, library.get, start_margin_frames=0)
+
+
+def _tick(player: ClipPlayer) -> Callable[[int], object]:
+    return lambda at_frame: player.tick()
 
 
 def _timeline(midi_file: mido.MidiFile, mapper: MidiMapper, fs: float) -> Iterator[Cue]:
@@ -161,6 +194,7 @@ def render_midi_file(
     presets: Any = None,
     block: int = DEFAULT_BLOCK,
     engine: Engine | None = None,
+    clips: Any = None,
 ) -> tuple[NDArray[np.float32], float]:
     """Render a MIDI file (CC automation and notes) offline into an array.
 
@@ -181,6 +215,8 @@ def render_midi_file(
         A non-positive length, or one too long to hold in memory
         (:data:`~vibsynth.app.render.MAX_COLLECT_BYTES`).
     """
-    job = prepare_midi_render(path, config=config, basis=basis, seconds=seconds, presets=presets, engine=engine)
+    job = prepare_midi_render(
+        path, config=config, basis=basis, seconds=seconds, presets=presets, engine=engine, clips=clips
+    )
     result = render_midi_to(job, ArrayCollector(job.frames, job.engine.channels), block=block)
     return result.output, job.fs

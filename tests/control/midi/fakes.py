@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import mido
+
 
 class FakeEngine:
     """One channel, every command applied at once, the stream clock at frame 0."""
@@ -17,3 +19,16 @@ class FakeEngine:
 
     applied_seq = property(lambda self: self.n)
     frame_position = property(lambda self: 0)
+
+
+class LoopPort(mido.ports.BaseIOPort):
+    """A test port: what is sent comes back out of receive/iter_pending."""
+
+    def _open(self, **kwargs) -> None:
+        self._queue: list[mido.Message] = []
+
+    def _send(self, msg: mido.Message) -> None:
+        self._queue.append(msg)
+
+    def _receive(self, block: bool = True):
+        return self._queue.pop(0) if self._queue else None

@@ -8,6 +8,7 @@ import mido
 import numpy as np
 import pytest
 
+from tests.control.midi.fakes import LoopPort
 from vibsynth.control.controller import Controller, KnobLimits
 from vibsynth.control.midi.bindings import Binding, MidiSettings, parse_bindings, parse_channel_map, scale_raw
 from vibsynth.control.midi.mapper import MidiMapper
@@ -37,19 +38,6 @@ class FakeEngine:
     @property
     def frame_position(self) -> int:
         return 0
-
-
-class LoopPort(mido.ports.BaseIOPort):
-    """A test port: what is sent comes back out of receive/iter_pending."""
-
-    def _open(self, **kwargs) -> None:
-        self._queue: list[mido.Message] = []
-
-    def _send(self, msg: mido.Message) -> None:
-        self._queue.append(msg)
-
-    def _receive(self, block: bool = True):
-        return self._queue.pop(0) if self._queue else None
 
 
 @dataclass

@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from vibsynth.control.clips.timeline import ClipLike, ClipPosition, ClipTimeline, KnobMove
+from vibsynth.control.controller import check_range
 from vibsynth.errors import EngineBusyError, ParameterError, VibsynthError
 
 __all__ = [
@@ -346,17 +347,18 @@ class ClipPlayer:
         release_s: float | None = None,
         at_frame: int | None = None,
         source: str = "api",
+        only: ClipTimeline | None = None,
     ) -> int:
         """Stop the clips on channels (None = all), now or at a stream frame; returns how many channels had one.
 
         The channels glide back to the layer below (their knob state) over ``release_s``
         (None = the channel's glide). A stop at a frame lets the clip play until then and
-        drops plays waiting to start after it.
+        drops plays waiting to start after it. With ``only`` (what :meth:`play` returned),
+        only the channels where that play is still playing or waiting are stopped (a MIDI
+        note-off stops its own clip, not one that took the channel over since).
         """
         chans = self._channels(channels)
         if release_s is not None:
-            from vibsynth.control.controller import check_range
-
             release_s = check_range("release", release_s, 0.0, self.controller.limits.glide_max_s)
         with self._lock:
             now = int(self.engine.frame_position)
@@ -364,7 +366,7 @@ class ClipPlayer:
             stopped = []
             for c in chans:
                 queue = self._queues[c]
-                if not queue:
+                if not queue or (only is not None and not any(self._holds(p, c, only, now) for p in queue)):
                     continue
                 keep = [p for p in queue if p.start < frame]
                 for p in queue:
@@ -391,6 +393,12 @@ class ClipPlayer:
             self._forget_idle()
         self._wake.set()
         return len(stopped)
+
+    @staticmethod
+    def _holds(p: _Playback, channel: int, timeline: ClipTimeline, now: int) -> bool:
+        """Is ``p`` the play of ``timeline``, still playing or waiting on ``channel``?"""
+        finish = p.finish(channel)
+        return p.timeline is timeline and (finish is None or finish > now)
 
     def playing(self, channel: int) -> Playing | None:
         """What plays on ``channel`` (0-based) now, or the next clip waiting to start; None when idle."""

@@ -11,6 +11,7 @@ from typing import Any
 import mido
 
 from vibsynth.control.midi.bindings import KNOBS, MidiSettings, check_learn_knob
+from vibsynth.control.midi.clipnotes import ClipNotes
 from vibsynth.control.midi.learn_store import user_config_path
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import VIRTUAL_PORT_NAME, MidiServer, _one_line, resolve_port_name, running_servers
@@ -102,7 +103,8 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
         except DeviceError as exc:
             log.warning("running without MIDI: %s. %s", exc, port_help())
             return None
-    mapper = MidiMapper(controller, settings, presets=presets)
+    clip_notes = ClipNotes.from_settings(settings_of(config).midi_clips, controller)  # notes -> clips
+    mapper = MidiMapper(controller, settings, presets=presets, clip_notes=clip_notes)
     mapper.positions = PositionControllers.from_config(config, controller)  # sources.midi
     server = MidiServer(
         mapper,

@@ -56,6 +56,7 @@ from typing import Any, Protocol
 
 import mido
 
+from vibsynth.control.clips import player_of
 from vibsynth.control.midi.bindings import (
     _NOTES_OFF_CCS,
     _REALTIME,
@@ -73,6 +74,7 @@ from vibsynth.control.midi.bindings import (
     check_learn_knob,
     scale_raw,
 )
+from vibsynth.control.midi.clipnotes import CC_SUSTAIN, ClipNotes
 from vibsynth.errors import ParameterError, PresetError
 
 
@@ -175,9 +177,11 @@ class MidiMapper:
         presets: Any = None,
         source: str = "midi",
         clock: Callable[[], float] = time.monotonic,
+        clip_notes: ClipNotes | None = None,
     ) -> None:
         self.controller = controller
         self.settings = settings
+        self.clip_notes = clip_notes  # notes that play haptic clips (control/midi/clipnotes.py)
         self.presets = presets
         self.source = source
         self.clock = clock
@@ -278,6 +282,8 @@ class MidiMapper:
             if channel is None:
                 self._reject("midi_unknown")
                 return False
+            if self.clip_notes is not None and self._clip_message(msg, kind, at_frame):
+                return True
             if kind == "control_change" and self.positions is not None:  # source coordinates: any MIDI channel
                 if self.positions.handle(channel, msg.control, msg.value, at_frame):
                     return True
@@ -298,6 +304,22 @@ class MidiMapper:
     def _reject(self, kind: str) -> None:
         self.counts[kind] += 1
         self.controller.count_error(kind)
+
+    def _clip_message(self, msg: mido.Message, kind: str, at_frame: int | None) -> bool:
+        """Notes of the clip map, the sustain pedal and all-notes-off for the clips; True when done with ``msg``."""
+        notes = self.clip_notes
+        assert notes is not None
+        if kind == "note_on" and msg.velocity > 0:
+            return notes.note_on(msg, self.settings.channel_map, at_frame)
+        if kind in ("note_on", "note_off"):
+            return notes.note_off(msg, at_frame)
+        if kind == "control_change":
+            if msg.control in _NOTES_OFF_CCS:
+                notes.channel_off(msg.channel, at_frame=at_frame, release_s=self.settings.fade_s)
+                return msg.channel not in self.settings.channel_map  # where it maps, the texture is silenced too
+            if msg.control == CC_SUSTAIN:
+                return notes.pedal(msg.channel, msg.value, at_frame) and CC_SUSTAIN not in self._by_cc
+        return False
 
     # ------------------------------------------------------------------ notes
     def _on_note_on(self, msg: mido.Message, acts: tuple[int, ...], at_frame: int | None) -> bool:
@@ -520,13 +542,18 @@ class MidiMapper:
 
     # ------------------------------------------------------------------ silence
     def silence(self, acts: Iterable[int] | None, *, at_frame: int | None = None) -> None:
-        """Silence actuators immediately (all notes off, intensity to 0 with the short fade).
+        """Silence actuators immediately (all notes off, intensity to 0 with the short fade, their clips stopped).
 
         ``acts=None`` means every actuator; without ``at_frame`` that is
         :meth:`Controller.panic` (which also drops scheduled commands).
         """
         targets = tuple(range(len(self._act))) if acts is None else tuple(acts)
         every = len(set(targets)) == len(self._act)
+        if self.clip_notes is not None:
+            self.clip_notes.all_off(None if every else targets, at_frame=at_frame, release_s=self.settings.fade_s)
+        player = player_of(self.controller)
+        if player is not None and not (every and at_frame is None):  # (a panic stops every clip itself)
+            player.stop(channels=targets, release_s=self.settings.fade_s, at_frame=at_frame, source=self.source)
         for a in targets:
             st = self._act[a]
             st.held.clear()
@@ -545,6 +572,8 @@ class MidiMapper:
         Used when a port vanishes: no note stays stuck. Continuous-mode levels are kept.
         """
         targets = tuple(range(len(self._act))) if acts is None else tuple(acts)
+        if self.clip_notes is not None and acts is None:
+            self.clip_notes.release_all()
         released = tuple(a for a in targets if self._act[a].held)
         for a in released:
             self._act[a].held.clear()
