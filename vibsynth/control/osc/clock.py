@@ -10,10 +10,15 @@ from typing import Any
 class StreamClock:
     """Maps wall time (``time.time()``) to the engine's stream position (frames).
 
-    The engine publishes ``frame_position`` in whole blocks, so one sample
-    ``frame/fs - wall`` is late by up to a block; the estimate keeps the largest
-    (least late) offset seen, decaying slowly (``drift`` s/s, 1000 ppm: more than sound
-    cards and JACK's dummy driver drift) so that the drift between the audio clock and
+    The engine publishes ``frame_position`` in whole blocks, after rendering each one at the
+    start of its audio cycle: at that moment the block it just rendered, which starts one
+    block *before* ``frame_position``, begins to play. So the frame playing at a wall time is
+    estimated from ``(frame_position - block)/fs - wall`` (``block``: the engine's
+    ``max_block``, the output's callback size when serving; without it the offset would put
+    every timetagged command one block late). One such sample is late by up to a block more
+    (it may be taken later in the cycle); the estimate keeps the largest (least late) offset
+    seen, decaying slowly (``drift`` s/s, 1000 ppm: more than sound cards and JACK's dummy
+    driver drift) so that the drift between the audio clock and
     the system clock is followed, and resets when the stream jumps (restart). The OSC
     handler samples it with every batch of packets it receives.
     """
@@ -22,6 +27,7 @@ class StreamClock:
         self, engine: Any, *, drift: float = 1e-3, reset_s: float = 0.25, wall: Callable[[], float] = time.time
     ) -> None:
         self.engine = engine
+        self.lead_frames = int(getattr(engine, "max_block", 0) or 0)
         self.drift = drift
         self.reset_s = reset_s
         self.wall = wall
@@ -32,7 +38,7 @@ class StreamClock:
         """Read the engine clock once; return ``(frame_position, wall_time)``."""
         frame = int(self.engine.frame_position)
         now = self.wall()
-        offset = frame / float(self.engine.fs) - now
+        offset = (frame - self.lead_frames) / float(self.engine.fs) - now
         est = self._offset
         if est is None:
             est = offset
