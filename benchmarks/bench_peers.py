@@ -375,10 +375,11 @@ class JackServer:
     would leak a slot whenever a jackd dies without unregistering.
     """
 
-    def __init__(self, name: str, rate: int, period: int, logdir: Path) -> None:
+    def __init__(self, name: str, rate: int, period: int, logdir: Path, driver_args: tuple[str, ...] = ()) -> None:
         if _server_running(name):
             name = f"{name}-{os.getpid()}"
         self.name, self.rate, self.period = name, rate, period
+        self.driver_args = driver_args  # more dummy-driver options, e.g. ("-P", "16") playback ports
         self.log = logdir / f"jackd-{name}.log"
         self.env = dict(os.environ, JACK_DEFAULT_SERVER=name, JACK_NO_AUDIO_RESERVATION="1")
         self.proc: subprocess.Popen | None = None
@@ -389,7 +390,7 @@ class JackServer:
             cmd = (
                 ["jackd", "-n", self.name]
                 + (["-R"] if realtime else [])
-                + ["-d", "dummy", "-r", str(self.rate), "-p", str(self.period)]
+                + ["-d", "dummy", "-r", str(self.rate), "-p", str(self.period), *self.driver_args]
             )
             self.proc = spawn(cmd, env=self.env, log=self.log)
             ok = (

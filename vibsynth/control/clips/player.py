@@ -57,6 +57,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from vibsynth.control import spatial
+from vibsynth.control.clips.sources import NO_SOURCES, SourceClips
 from vibsynth.control.clips.timeline import ClipLike, ClipPosition, ClipTimeline, KnobMove
 from vibsynth.control.controller import check_range
 from vibsynth.errors import EngineBusyError, ParameterError, VibsynthError
@@ -272,6 +274,14 @@ class ClipPlayer:
         self._stops: list[tuple[int, int, float | None]] = []  # (frame, channel, release glide) to act on
         # per channel: frame of the clip layer's takeover in the engine (None: the layer is released there)
         self._takeover: list[int | None] = [None] * controller.channels
+        #: clips on the spatial touch sources (control/clips/sources.py)
+        self.sources = SourceClips(
+            lambda: spatial.mixer_of(controller),
+            resolve,
+            fs=self.fs,
+            limits=controller.limits,
+            lookahead_frames=self.lookahead_frames,
+        )
         self._wake = threading.Event()
         self._halt = threading.Event()
         self._thread: threading.Thread | None = None
@@ -400,6 +410,51 @@ class ClipPlayer:
         finish = p.finish(channel)
         return p.timeline is timeline and (finish is None or finish > now)
 
+    def play_source(
+        self,
+        name: str,
+        *,
+        sources: Sequence[int] | None = None,
+        gain: float = 1.0,
+        rate: float = 1.0,
+        loops: float = 1,
+        at_frame: int | None = None,
+    ) -> ClipTimeline:
+        """Play clip ``name`` on spatial sources (0-based; None = every source), now or at a stream frame.
+
+        Raises
+        ------
+        VibsynthError
+            No layout (no sources), unknown clip, arguments out of range, no such source.
+        """
+        now = int(self.engine.frame_position)
+        start = now + self.start_margin_frames if at_frame is None else max(int(at_frame), now)
+        every = range(len(self._mixer_table()))
+        timeline = self.sources.play(
+            name, every if sources is None else sources, gain=gain, rate=rate, loops=loops, start_frame=start, now=now
+        )
+        self.stats.plays += 1
+        self._wake.set()
+        return timeline
+
+    def stop_source(
+        self, *, sources: Sequence[int] | None = None, release_s: float | None = None, at_frame: int | None = None
+    ) -> int:
+        """Stop the clips on spatial sources (None = every source); they glide back to their texture."""
+        if release_s is not None:
+            release_s = check_range("release", release_s, 0.0, self.controller.limits.glide_max_s)
+        stopped = self.sources.stop(
+            sources, release_s=release_s, at_frame=at_frame, now=int(self.engine.frame_position)
+        )
+        self.stats.stops += 1 if stopped else 0
+        return stopped
+
+    def _mixer_table(self) -> Any:
+        mixer = spatial.mixer_of(self.controller)
+        if mixer is None:
+            raise VibsynthError(NO_SOURCES)
+        return mixer.table
+
     def playing(self, channel: int) -> Playing | None:
         """What plays on ``channel`` (0-based) now, or the next clip waiting to start; None when idle."""
         with self._lock:
@@ -463,6 +518,8 @@ class ClipPlayer:
                 e for p in self._playbacks if (e := p.done_at()) is not None and e > now
             ]
             idle = not self._playbacks and not self._stops
+        self.sources.pump(now)
+        idle = idle and not self.sources.names()
         if idle:
             return 1.0
         delay = self.tick_s
@@ -661,6 +718,7 @@ class ClipPlayer:
             self._queues = [[] for _ in self._queues]
             self._stops.clear()
             self._takeover = [None] * len(self._takeover)
+            self.sources.clear()
             if active:
                 self.controller.cancel_scheduled(LAYER)
                 self.controller.release(LAYER, channels=None, glide_s=0.0, source="panic")

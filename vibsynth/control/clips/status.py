@@ -23,14 +23,17 @@ def clip_values(controller: Any, channel: int) -> tuple[str, float, int]:
 
 
 def clip_status(controller: Any) -> list[tuple[str, object]]:
-    """``clips_playing``, then ``ch{n}.clip`` (name, "" = none), ``ch{n}.clip_ms``, ``ch{n}.clip_loops_left``.
+    """``clips_playing``, then ``ch{n}.clip`` (name, "" = none), ``ch{n}.clip_ms``, ``ch{n}.clip_loops_left``,
+    then ``source{k}.clip`` (name) for each touch source a clip plays on.
 
     Empty when no clip player runs.
     """
-    if player_of(controller) is None:
+    player = player_of(controller)
+    if player is None:
         return []
     rows = [clip_values(controller, c) for c in range(controller.channels)]
     pairs: list[tuple[str, object]] = [("clips_playing", sum(1 for name, _, _ in rows if name))]
     for c, (name, position, left) in enumerate(rows):
         pairs += [(f"ch{c + 1}.clip", name), (f"ch{c + 1}.clip_ms", position), (f"ch{c + 1}.clip_loops_left", left)]
+    pairs += [(f"source{k + 1}.clip", name) for k, name in sorted(player.sources.names().items())]
     return pairs

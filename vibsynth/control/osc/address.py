@@ -51,7 +51,7 @@ MAX_PATTERN_LEN = 256
 MAX_FANOUT = 1024
 """Most routes one pattern may lead to; a pattern matching more is an error (nothing is done).
 
-The table holds ``17 + 10 x channels + 16 x 10`` routes (the sources'), 817 at the maximum of 64
+The table holds ``17 + 10 x channels + 16 x 12`` routes (the sources'), 849 at the maximum of 64
 channels (``audio.channels``), so every pattern, ``/vibsynth/ch/*/intensity`` and even
 ``/vibsynth/*/*/*`` included, fits on every supported configuration; the cap bounds the
 work of one message should the table ever grow.
@@ -81,7 +81,20 @@ GLOBAL_METHODS = (
 CHANNEL_METHODS = ("intensity", "balance", "texture", "glide", "mute", "preset", "speed", "get", "play", "stop")
 """Methods under ``{prefix}/ch/{n}/``; they act on channel n only."""
 
-SOURCE_METHODS = ("pos", "texture", "intensity", "balance", "preset", "radius", "rolloff", "on", "speed", "get")
+SOURCE_METHODS = (
+    "pos",
+    "texture",
+    "intensity",
+    "balance",
+    "preset",
+    "radius",
+    "rolloff",
+    "on",
+    "speed",
+    "get",
+    "play",
+    "stop",
+)
 """Methods under ``{prefix}/source/{k}/`` (k = 1..16): the touch sources (docs/vr.md). Their routes
 are named ``source/<method>`` and carry the 0-based source index in ``Route.channel``."""
 

@@ -40,7 +40,12 @@ class ClipMethods:
 
     def methods(self) -> dict[str, Any]:
         """Method name -> handler function (``(msg, channels, peer, at_frame)``), for the handler's table."""
-        return {"play": self.on_play, "stop": self.on_stop}
+        return {
+            "play": self.on_play,
+            "stop": self.on_stop,
+            "source/play": self.on_source_play,
+            "source/stop": self.on_source_stop,
+        }
 
     def _player(self) -> ClipPlayer:
         player = player_of(self.handler.controller)
@@ -48,7 +53,8 @@ class ClipMethods:
             raise VibsynthError("clips are not available (no clip player is running)")
         return player
 
-    def on_play(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
+    @staticmethod
+    def _play_args(msg: Message) -> tuple[str, float, float, float]:
         _arg_count(msg, (1, 2, 3, 4), "clip name, then optional gain, rate, loops")
         name = _string(msg, 0, "clip")
         gain = _number(msg, 1, "gain") if len(msg.args) > 1 else 1.0
@@ -56,6 +62,17 @@ class ClipMethods:
         loops = _number(msg, 3, "loops") if len(msg.args) > 3 else 1.0
         if len(name) > 128:
             raise ParameterError(f"clip name longer than 128 characters ({len(name)})")
+        return name, gain, rate, loops
+
+    def _release_s(self, msg: Message) -> float | None:
+        _arg_count(msg, (0, 1), "optional release in ms")
+        if not msg.args:
+            return None
+        max_ms = self.handler.controller.limits.glide_max_s * 1000.0
+        return check_range("release (ms)", _number(msg, 0, "release"), 0.0, max_ms) / 1000.0
+
+    def on_play(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
+        name, gain, rate, loops = self._play_args(msg)
         player = self._player()
         try:
             player.play(
@@ -71,12 +88,23 @@ class ClipMethods:
             self.handler._error(peer, msg.address, str(exc), "osc.clip")
 
     def on_stop(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
-        _arg_count(msg, (0, 1), "optional release in ms")
-        release_s = None
-        if msg.args:
-            max_ms = self.handler.controller.limits.glide_max_s * 1000.0
-            release_s = check_range("release (ms)", _number(msg, 0, "release"), 0.0, max_ms) / 1000.0
+        release_s = self._release_s(msg)
         self._player().stop(channels=channels, release_s=release_s, at_frame=at_frame, source=SOURCE)
+
+    def on_source_play(
+        self, msg: Message, sources: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None
+    ) -> None:
+        name, gain, rate, loops = self._play_args(msg)
+        try:
+            self._player().play_source(name, sources=sources, gain=gain, rate=rate, loops=loops, at_frame=at_frame)
+        except ClipError as exc:
+            self.handler._error(peer, msg.address, str(exc), "osc.clip")
+
+    def on_source_stop(
+        self, msg: Message, sources: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None
+    ) -> None:
+        release_s = self._release_s(msg)
+        self._player().stop_source(sources=sources, release_s=release_s, at_frame=at_frame)
 
     # ------------------------------------------------------------------ queries
     def reply_get(self, peer: PeerLike, channels: tuple[int, ...] | None) -> None:
