@@ -4,17 +4,17 @@
 
 const PROTOCOLS = {
   intensity: {
-    label: "Intensity equalisation (experiment 1)",
+    label: "Intensity (experiment 1)",
     instructions: "Adjust the slider until the stimulus feels as intense as the reference. " +
       "Play either as often as you like, then press Next.",
   },
   dissimilarity: {
-    label: "Pairwise dissimilarity (experiment 2)",
+    label: "Dissimilarity (experiment 2)",
     instructions: "You feel two vibrations, one after the other. How different do they feel? " +
       "Set the slider, then press Next.",
   },
   resynthesis: {
-    label: "Re-synthesis rating (experiment 3)",
+    label: "Re-synthesis (experiment 3)",
     instructions: "Compare each version with the reference. Rate how similar it feels; " +
       "set the most similar one to the top (1). Play them as often as you like.",
   },
@@ -73,7 +73,7 @@ export async function mount(panel, studio) {
   const stimuli = el("select", { id: "lab-stimuli", "data-testid": "lab-stimuli" });
   const folder = el("input", {
     type: "text", id: "lab-stimuli-folder", "data-testid": "lab-stimuli-folder", autocomplete: "off",
-    placeholder: "or a folder of WAV files on the machine running vibsynth", "aria-describedby": "lab-folder-help",
+    placeholder: "a folder of WAV files (optional)", "aria-describedby": "lab-folder-help",
   });
   const participant = el("input", {
     type: "text", id: "lab-participant", "data-testid": "lab-participant", autocomplete: "off",
