@@ -79,6 +79,12 @@ def lab(tmp_path_factory, hatt_psd):
             browser.quit()
 
 
+def vibsynth(*args: object) -> str:
+    """Run the vibsynth command line; its standard output."""
+    cmd = [sys.executable, "-m", "vibsynth", *map(str, args)]
+    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=True).stdout
+
+
 def b_selected(browser, tab_id: str) -> bool:
     return browser.find_element("id", tab_id).get_attribute("aria-selected") == "true"
 
@@ -124,6 +130,15 @@ def set_up(browser, *, protocol, participant, seed, folder="", stimuli=None, fam
     browser.find_element(*by("lab-start")).click()
 
 
+def start(browser, root: Path, **set_up_fields) -> tuple[Path, dict]:
+    """Set a session up and start it; its folder and session.json once the first trial shows."""
+    known = set(root.iterdir()) if root.exists() else set()
+    set_up(browser, **set_up_fields)
+    wait(browser, lambda b: any(e.is_displayed() for e in b.find_elements(*by("lab-progress"))), "the first trial")
+    folder = new_session_folder(root, known)
+    return folder, json.loads((folder / "session.json").read_text())
+
+
 def new_session_folder(root: Path, known: set[Path]) -> Path:
     found = [p for p in root.iterdir() if p.is_dir() and p not in known and (p / "session.json").is_file()]
     assert len(found) == 1, found
@@ -167,18 +182,16 @@ def back_to_set_up(browser) -> None:
 
 
 def run_dissimilarity(browser, root, stimuli, participant, seed, t1, *, familiarisation, extras=False, tmp=None):
-    known = set(root.iterdir()) if root.exists() else set()
-    set_up(
+    folder, meta = start(
         browser,
+        root,
         protocol="dissimilarity",
         participant=participant,
         seed=seed,
         folder=str(stimuli),
         familiarisation=familiarisation,
     )
-    wait(browser, lambda b: any(e.is_displayed() for e in b.find_elements(*by("lab-progress"))), "the first trial")
-    folder = new_session_folder(root, known)
-    plan = json.loads((folder / "session.json").read_text())["plan"]
+    plan = meta["plan"]
     scale = max(abs(a - b) for a in t1.values() for b in t1.values())
     fam_seen = 0
     while not browser.find_element(*by("lab-done")).is_displayed():
@@ -244,28 +257,19 @@ def test_dissimilarity_in_the_browser(lab):
     # order: what the seed gives (the command line says the same), not sorted, another seed another
     order = [(r["stimulus_a"], r["stimulus_b"]) for r in rows]
     assert order == [tuple(t["stimuli"]) for t in json.loads((first / "session.json").read_text())["plan"]["test"]]
-    plan = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "vibsynth",
-            "lab",
-            "plan",
-            "dissimilarity",
-            "--stimuli",
-            str(stimuli),
-            "--seed",
-            "11",
-            "--familiarisation",
-            "2",
-            "--format",
-            "csv",
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+    plan = vibsynth(
+        "lab",
+        "plan",
+        "dissimilarity",
+        "--stimuli",
+        str(stimuli),
+        "--seed",
+        "11",
+        "--familiarisation",
+        "2",
+        "--format",
+        "csv",
+    )
     planned = [r["stimuli"].split(" / ") for r in csv.DictReader(plan.splitlines()) if r["phase"] == "test"]
     assert [list(p) for p in order] == planned
     assert order != sorted(order)
@@ -291,25 +295,7 @@ def test_dissimilarity_in_the_browser(lab):
     browser.execute_script("document.querySelector('.lab-results').scrollIntoView()")
     shot(browser, tmp, "lab-results")
     # and from the command line, across both participants
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "vibsynth",
-            "lab",
-            "analyze",
-            str(first),
-            str(second),
-            "--splits",
-            "20",
-            "--format",
-            "json",
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+    out = vibsynth("lab", "analyze", str(first), str(second), "--splits", "20", "--format", "json")
     result = json.loads(out)
     assert int(np.argmax(result["fit"]["weights"])) == 0 and result["fit"]["cv"] == 8
     assert result["participant_r"] == pytest.approx(1.0)
@@ -323,11 +309,7 @@ def test_intensity_in_the_browser_with_a_stop_and_a_resume(lab):
     from vibsynth.formats.recordings import read_recording
 
     browser, root, stimuli, tmp = lab
-    known = set(root.iterdir())
-    set_up(browser, protocol="intensity", participant="p03", seed=5, folder=str(stimuli))
-    wait(browser, lambda b: any(e.is_displayed() for e in b.find_elements(*by("lab-progress"))), "the first trial")
-    folder = new_session_folder(root, known)
-    meta = json.loads((folder / "session.json").read_text())
+    folder, meta = start(browser, root, protocol="intensity", participant="p03", seed=5, folder=str(stimuli))
 
     def level(sid: str) -> float:
         rec = read_recording(folder / "stimuli" / f"{sid}.wav")
@@ -377,13 +359,7 @@ def test_intensity_in_the_browser_with_a_stop_and_a_resume(lab):
     for r in rows:
         assert float(r["gain"]) == pytest.approx(expected[r["stimulus"]], rel=0.01)
         assert r["reference"] == "reference" and int(r["plays"]) >= 2 and r["reference_plays"] == "1"
-    out = subprocess.run(
-        [sys.executable, "-m", "vibsynth", "lab", "analyze", str(folder), "--format", "json"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+    out = vibsynth("lab", "analyze", str(folder), "--format", "json")
     result = json.loads(out)
     assert result["r2"] > 0.99 and result["slope"] == pytest.approx(1.0, abs=0.02)
     assert result["level_sd_after"] < 0.1 < result["level_sd_before"]
@@ -396,11 +372,7 @@ def test_resynthesis_in_the_browser(lab):
     from vibsynth.formats.recordings import read_recording
 
     browser, root, stimuli, tmp = lab
-    known = set(root.iterdir())
-    set_up(browser, protocol="resynthesis", participant="p04", seed=8, folder=str(stimuli))
-    wait(browser, lambda b: any(e.is_displayed() for e in b.find_elements(*by("lab-progress"))), "the first trial")
-    folder = new_session_folder(root, known)
-    meta = json.loads((folder / "session.json").read_text())
+    folder, meta = start(browser, root, protocol="resynthesis", participant="p04", seed=8, folder=str(stimuli))
 
     def t1(sid: str) -> float:
         rec = read_recording(folder / "stimuli" / f"{sid}.wav")
@@ -437,13 +409,7 @@ def test_resynthesis_in_the_browser(lab):
         for version in ("O", "S1", "S1:8", "S2:8", "M"):
             assert float(r[f"rating_{version}"]) == pytest.approx(expected[(r["original"], version)], abs=1e-3)
             assert r[f"plays_{version}"] == "1"
-    out = subprocess.run(
-        [sys.executable, "-m", "vibsynth", "lab", "analyze", str(folder), "--format", "json"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+    out = vibsynth("lab", "analyze", str(folder), "--format", "json")
     summary = {row["version"]: row for row in json.loads(out)["summary"]}
     assert summary["O"]["mean"] == 1.0 and summary["O"]["n"] == 6
     assert summary["S1:8"]["mean"] > summary["M"]["mean"]  # the rule: S1:8 keeps t1, M does not
