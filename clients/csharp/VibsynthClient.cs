@@ -1782,6 +1782,18 @@ namespace Vibsynth
         /// <summary>The preset a channel last got, or null; blocks up to the timeout.</summary>
         public string GetPreset(int channel = 1, TimeSpan? timeout = null) { return Wait(GetPresetAsync(channel, timeout)); }
 
+        /// <summary>
+        /// Which layer a channel plays: "knobs" (its own knobs), "sources" (touch sources reach it) or "clip"
+        /// (a clip drives it).
+        /// </summary>
+        public Task<string> GetDriverAsync(int channel = 1, TimeSpan? timeout = null)
+        {
+            return Get(channel, "driver", m => m.Count == 1 && m.IsString(0), m => m.GetString(0), timeout);
+        }
+
+        /// <summary>Which layer a channel plays; blocks up to the timeout.</summary>
+        public string GetDriver(int channel = 1, TimeSpan? timeout = null) { return Wait(GetDriverAsync(channel, timeout)); }
+
         /// <summary>What clip a channel plays, where in it, and how many loops are left.</summary>
         public Task<ClipState> GetClipAsync(int channel = 1, TimeSpan? timeout = null)
         {

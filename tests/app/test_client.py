@@ -107,6 +107,9 @@ def test_set_get_round_trips(live):
         assert c.get("mute", 3) is False
         assert c.get("preset", 1) == "silk" and c.get("intensity", 1) == pytest.approx(0.3)
         assert ctl.get("intensity", 1) == pytest.approx(0.25)  # the server's own view (0-based)
+        assert c.get("driver", 2) == "knobs"
+        ctl.drive("clip", channels=[1], intensity=0.9)
+        assert c.get("driver", 2) == "clip" and c.get("driver", 1) == "knobs"
         c.panic()
         c.sync()
         assert c.get("intensity", 2) == 0.0

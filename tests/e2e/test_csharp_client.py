@@ -162,9 +162,11 @@ def test_clips_play_loop_report_and_stop(server, python_client, client_check):
     assert float(seen["ch1.position_ms"]) > 0  # it advanced in the 150 ms since it started
     assert (seen["ch2.name"], seen["ch2.loops_left"]) == ("heartbeat", "2")
     assert seen["ch3"] == "(no clip)"
+    assert (seen["ch1.driver"], seen["ch3.driver"]) == ("clip", "knobs")
     assert (seen["status.clips_playing"], seen["status.ch1.clip"]) == ("2", "heartbeat")
     # stopped: the channel glides back to its own knobs
     assert seen["stopped"] == "(no clip)"
+    assert seen["stopped.driver"] == "knobs"
     assert _texture(seen["stopped.texture"]) == pytest.approx((0.2, 0.0))
     # a timetagged PlayClipAll: waiting at position 0 before its time, playing after
     assert seen["all.before"] == "(heartbeat at 0 ms, -1 loops left)"

@@ -74,7 +74,7 @@ MAX_BUNDLE_DEPTH = 8
 #: :meth:`Client.at` reads numbers below this as seconds from now, others as Unix time.
 RELATIVE_LIMIT_S = 1e9
 
-GETTABLE = ("intensity", "balance", "texture", "glide", "mute", "preset")
+GETTABLE = ("intensity", "balance", "texture", "glide", "mute", "preset", "driver")
 
 _BUNDLE_TAG = b"#bundle\x00"
 _MAX_PENDING_ERRORS = 256
@@ -936,6 +936,8 @@ class Client(_Commands):
     @overload
     def get(self, what: Literal["preset"], channel: int = 1, timeout: float | None = None) -> str | None: ...
     @overload
+    def get(self, what: Literal["driver"], channel: int = 1, timeout: float | None = None) -> str: ...
+    @overload
     def get(self, what: Literal["texture"], channel: int = 1, timeout: float | None = None) -> tuple[float, float]: ...
     @overload
     def get(
@@ -949,7 +951,7 @@ class Client(_Commands):
 
         Parameters
         ----------
-        what : {"intensity", "balance", "texture", "glide", "mute", "preset"}
+        what : {"intensity", "balance", "texture", "glide", "mute", "preset", "driver"}
         channel : int
             1-based channel.
         timeout : float, optional
@@ -959,7 +961,8 @@ class Client(_Commands):
         -------
         float, bool, str, tuple or None
             intensity, balance: float; glide: float (ms); mute: bool; preset: str, or None when
-            no preset is applied; texture: ``(intensity, balance)``. Floats come as OSC
+            no preset is applied; texture: ``(intensity, balance)``; driver: the layer the channel
+            plays, ``"knobs"``, ``"sources"`` or ``"clip"``. Floats come as OSC
             float32 (``0.6`` reads ``0.6000000238418579``).
 
         Raises
@@ -988,7 +991,7 @@ class Client(_Commands):
                 ok = len(args) == 2 and numeric(args[0]) and numeric(args[1])
             elif what == "mute":
                 ok = len(args) == 1 and (numeric(args[0]) or isinstance(args[0], bool))
-            elif what == "preset":
+            elif what in ("preset", "driver"):
                 ok = len(args) == 1 and isinstance(args[0], str)
             else:
                 ok = len(args) == 1 and numeric(args[0])
@@ -1004,6 +1007,8 @@ class Client(_Commands):
             return bool(value[0])
         if what == "preset":
             return value[0] or None
+        if what == "driver":
+            return str(value[0])
         return float(value[0])
 
     def playing_clip(self, channel: int = 1, timeout: float | None = None) -> tuple[str, float, int] | None:

@@ -564,6 +564,8 @@ static class ClientCheck
             Say("ch2.name", two.Name);
             Say("ch2.loops_left", two.LoopsLeft);
             Say("ch3", client.GetClip(3));
+            Say("ch1.driver", client.GetDriver(1));
+            Say("ch3.driver", client.GetDriver(3));
             VibsynthStatus status = client.Status();
             Say("status.clips_playing", status.GetNumber("clips_playing"));
             Say("status.ch1.clip", status.GetString("ch1.clip"));
@@ -572,6 +574,7 @@ static class ClientCheck
             client.Sync();
             Thread.Sleep(200);
             Say("stopped", client.GetClip(1));
+            Say("stopped.driver", client.GetDriver(1));
             Say("stopped.texture", client.GetTexture(1));
             // every channel, started by a timetagged bundle 0.3 s ahead, then stopped for all
             VibsynthBundle later = client.At(0.3);

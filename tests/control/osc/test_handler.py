@@ -392,6 +392,19 @@ def test_get_global_and_per_channel(handler, ctl, peer):
     ]
 
 
+def test_get_driver_names_the_layer_that_plays(handler, ctl, peer):
+    ctl.drive("clip", channels=[1], intensity=0.7, balance=1.0)
+    send(handler, peer, "/vibsynth/ch/2/get", "driver")
+    send(handler, peer, "/vibsynth/get", "driver")
+    got = [(m.address, m.types, m.args) for m in peer.messages()]
+    assert got[0] == ("/vibsynth/ch/2/driver", "s", ("clip",))
+    assert got[1:] == [(f"/vibsynth/ch/{n}/driver", "s", ("clip" if n == 2 else "knobs",)) for n in range(1, 5)]
+    peer.clear()
+    ctl.release("clip", channels=[1])
+    send(handler, peer, "/vibsynth/get", "driver")
+    assert [(m.address, m.args) for m in peer.messages()] == [("/vibsynth/driver", ("knobs",))]
+
+
 def test_get_reply_is_a_valid_setter(handler, ctl, peer):
     send(handler, peer, "/vibsynth/ch/2/balance", -2.0)
     send(handler, peer, "/vibsynth/ch/2/get", "balance")

@@ -85,7 +85,7 @@ def test_error_reply_is_cut_to_three_times_the_request():
     assert handler.stats.replies_truncated == 1
     local = DatagramPeer(("::ffff:127.0.0.1", 40000))  # the same on this host: whole message
     handler.handle_packet(request, local)
-    assert local.errors()[0][1].endswith("texture, clip")
+    assert local.errors()[0][1].endswith("texture, driver, clip")
 
 
 def test_random_requests_never_amplify(rng):

@@ -489,8 +489,9 @@ class OscHandler:
         if name == "clip":
             self.clips.reply_get(peer, channels)
             return
-        if name not in fields and name != "texture":
-            raise ParameterError(f"unknown setting {name!r}; known: {', '.join(fields + ('texture', 'clip'))}")
+        if name not in fields and name not in ("texture", "driver"):
+            known = ", ".join((*fields, "texture", "driver", "clip"))
+            raise ParameterError(f"unknown setting {name!r}; known: {known}")
         states = self.controller.state()
         chans = range(len(states)) if channels is None else channels
 
@@ -498,6 +499,8 @@ class OscHandler:
             s = states[ch]
             if name == "texture":
                 return (s.intensity, s.balance)
+            if name == "driver":  # which layer plays: knobs, sources or clip (read-only)
+                return (self.controller.driver(ch),)
             return (
                 {
                     "intensity": s.intensity,
