@@ -103,6 +103,10 @@ class JackCapture:
         The captured samples (valid up to :attr:`frames_captured`).
     start_frame : int or None
         JACK frame time of ``data[0]``.
+    gaps : int
+        JACK cycles this client missed while recording (its process callback, Python, waited
+        for the GIL past a cycle): the capture then lacks those blocks and joins what is
+        around them, a hole in the instrument, not in the stream under test.
     rate : int
     """
 
@@ -123,6 +127,8 @@ class JackCapture:
         self.data = np.zeros((int(round(seconds * self.rate)), n_ports), dtype=np.float32)
         self.frames_captured = 0
         self.start_frame: int | None = None
+        self.gaps = 0
+        self._next_frame: int | None = None
         self._armed = False
         self._done = threading.Event()
         self.client.set_process_callback(self._process)
@@ -133,8 +139,12 @@ class JackCapture:
             return
         pos = self.frames_captured
         n = min(frames, self.data.shape[0] - pos)
+        now = self.client.last_frame_time
         if pos == 0:
-            self.start_frame = self.client.last_frame_time
+            self.start_frame = now
+        elif now != self._next_frame:
+            self.gaps += 1
+        self._next_frame = now + frames
         for k, port in enumerate(self.inports):
             self.data[pos : pos + n, k] = port.get_array()[:n]
         self.frames_captured = pos + n
@@ -154,6 +164,8 @@ class JackCapture:
         self._done.clear()
         self.frames_captured = 0
         self.start_frame = None
+        self.gaps = 0
+        self._next_frame = None
 
     def arm(self) -> None:
         """Start recording at the next JACK cycle."""
