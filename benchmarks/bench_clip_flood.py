@@ -46,7 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_osc import rate_test  # noqa: E402
+from bench_osc import rate_test, write_json  # noqa: E402
 from bench_peers import JackServer, Monitor, machine_info, proc_cpu_seconds, stop_all  # noqa: E402
 
 from tests.e2e.test_osc_e2e import Client, start_serve, stop_serve  # noqa: E402
@@ -221,9 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         "machine": machine_info(),
         "when": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2), encoding="utf-8")
-    print(f"\nJSON: {args.json}")
+    write_json(args.json, result)
     return 0
 
 

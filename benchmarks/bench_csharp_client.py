@@ -24,7 +24,6 @@ writes JSON to benchmarks/results/csharp_client.json.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import shutil
@@ -38,6 +37,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from bench_osc import write_json  # noqa: E402
 
 import vibsynth  # noqa: E402
 from tests.clients.mono import CLIENT, compile_cs, run_mono  # noqa: E402
@@ -130,9 +131,7 @@ def main() -> int:
     pipe = result["pipelined_1000"]
     print(f"1000 queries in flight: {pipe['median_ms']:.1f} ms ({pipe['queries_per_s']:.0f} queries/s)")
     print(f"set -> get returned another value: {result['set_get_mismatched']} times")
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2), encoding="utf-8")
-    print(f"\nJSON: {args.json}")
+    write_json(args.json, result)
     return 0
 
 

@@ -132,6 +132,13 @@ def rate_test(port: int, rate: int, seconds: float) -> dict:
     }
 
 
+def write_json(path: Path, result: dict) -> None:
+    """Write a benchmark's result as JSON (its folder created) and say where."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result, indent=2), encoding="utf-8")
+    print(f"\nJSON: {path}")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--trials", type=int, default=50)
@@ -178,9 +185,7 @@ def main() -> int:
             f"{r['underflows']:>10} {r['render_load']:>6.2f}"
         )
     print(f"max sustained rate without loss: {result['max_lossless_rate']:.0f} msg/s")
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2), encoding="utf-8")
-    print(f"\nJSON: {args.json}")
+    write_json(args.json, result)
     return 0
 
 

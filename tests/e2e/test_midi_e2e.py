@@ -134,13 +134,13 @@ RECEIVER = textwrap.dedent("""
 """)
 
 
-@REALTIME
-def test_virtual_input_notes_and_ccs_change_the_output(jack_env, tmp_path):
-    out_path = tmp_path / "out.npy"
+def play_to_receiver(receiver_source: str, seconds: float, script: str, env: dict[str, str], out: Path) -> str:
+    """Run a receiver (a Python source taking ``seconds`` and an output path) and play ``script``
+    to it through :data:`SENDER` on JACK MIDI; the receiver's standard output after READY."""
     receiver = subprocess.Popen(
-        [sys.executable, "-c", RECEIVER, "6.0", str(out_path)],
+        [sys.executable, "-c", receiver_source, str(seconds), str(out)],
         cwd=ROOT,
-        env=jack_env,
+        env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -148,14 +148,21 @@ def test_virtual_input_notes_and_ccs_change_the_output(jack_env, tmp_path):
     assert receiver.stdout is not None
     line = receiver.stdout.readline()
     assert line.startswith("READY"), line + receiver.stderr.read()
-    # silent 1 s; note on (dark: CC74 = 0); at 2.5 s bright (CC74 = 127); note off at 4 s
-    script = "sleep 1.0\ncc 74 0\non 60 127\nsleep 1.5\ncc 74 127\nsleep 1.5\noff 60\n"
     sender = subprocess.run(
-        [sys.executable, "-c", SENDER], input=script, cwd=ROOT, env=jack_env, text=True, capture_output=True, timeout=60
+        [sys.executable, "-c", SENDER], input=script, cwd=ROOT, env=env, text=True, capture_output=True, timeout=60
     )
     assert sender.returncode == 0, sender.stderr
     rest, err = receiver.communicate(timeout=60)
     assert receiver.returncode == 0, err
+    return rest
+
+
+@REALTIME
+def test_virtual_input_notes_and_ccs_change_the_output(jack_env, tmp_path):
+    out_path = tmp_path / "out.npy"
+    # silent 1 s; note on (dark: CC74 = 0); at 2.5 s bright (CC74 = 127); note off at 4 s
+    script = "sleep 1.0\ncc 74 0\non 60 127\nsleep 1.5\ncc 74 127\nsleep 1.5\noff 60\n"
+    rest = play_to_receiver(RECEIVER, 6.0, script, jack_env, out_path)
     assert "DONE" in rest
     x = np.load(out_path)
     fs = 8000
