@@ -425,7 +425,11 @@ export async function mount(panel, studio) {
     svg.setAttribute("aria-label", "MDS map of the ratings (blue) and of the model (red)");
     const all = mds.rated.concat(mds.predicted).flat().map(Math.abs);
     const scale = Math.max(...all, 1e-9);
-    const point = (p) => [p[0] / scale, -p[1] / scale];
+    // Points inside +-0.8 of the +-1.15 view: room for the names around them.
+    const point = (p) => [0.8 * p[0] / scale, -0.8 * p[1] / scale];
+    // Neighbours along the first dimension take turns above and below their points.
+    const order = mds.rated.map((p, k) => k).sort((a, b) => mds.rated[a][0] - mds.rated[b][0]);
+    const below = new Set(order.filter((k, rank) => rank % 2 === 1));
     mds.rated.forEach((p, k) => {
       const [x, y] = point(p);
       const [u, v] = point(mds.predicted[k]);
@@ -436,7 +440,11 @@ export async function mount(panel, studio) {
       const model = document.createElementNS(ns, "rect");
       Object.entries({ x: u - 0.02, y: v - 0.02, width: 0.04, height: 0.04, class: "model" }).forEach(([a, b]) => model.setAttribute(a, b));
       const label = document.createElementNS(ns, "text");
-      Object.entries({ x: x + 0.04, y: y - 0.03, class: "name" }).forEach(([a, b]) => label.setAttribute(a, b));
+      // Names on the right half read leftwards from their point, so none runs off the map.
+      const right = x > 0.2;
+      const dy = below.has(k) ? 0.1 : -0.04;
+      Object.entries({ x: right ? x - 0.04 : x + 0.04, y: y + dy, class: "name", "text-anchor": right ? "end" : "start" })
+        .forEach(([a, b]) => label.setAttribute(a, b));
       label.textContent = mds.names[k];
       svg.append(line, dot, model, label);
     });
