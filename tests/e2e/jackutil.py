@@ -17,7 +17,6 @@ captured samples and events on the same JACK frame clock (for latency).
 from __future__ import annotations
 
 import os
-import subprocess
 import threading
 from collections.abc import Sequence
 
@@ -40,16 +39,6 @@ E2E_REQUIRED_ENV = "VIBSYNTH_E2E_REQUIRED"
 def e2e_required() -> bool:
     """True when CI demands the e2e tests run (``VIBSYNTH_E2E_REQUIRED=1``)."""
     return os.environ.get(E2E_REQUIRED_ENV, "") == "1"
-
-
-def stop_process(proc: subprocess.Popen, timeout: float = 20.0) -> None:
-    """Stop a ``vibsynth serve`` started by a test: SIGTERM, then SIGKILL if it hangs."""
-    proc.terminate()
-    try:
-        proc.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 def jack_server_available() -> tuple[bool, str]:

@@ -108,11 +108,15 @@ class Served:
         stop_serve(self.proc)
 
 
-def start_serve(folder: Path, *, channels: int = 2, output: str = "null") -> Served:
+def start_serve(
+    folder: Path, *, channels: int = 2, output: str = "null", rate: int | None = None, extra_config: str = ""
+) -> Served:
     """Start ``vibsynth serve`` (null output by default) with a private user preset folder and config.
 
     The OSC tests' starter (:func:`tests.e2e.test_osc_e2e.start_serve`) with the studio on a free
     port, a token of its own, and ready once the ``studio:`` line is printed and OSC answers.
+    ``rate`` sets ``audio.rate``; ``extra_config`` (YAML) adds sections other than ``audio``,
+    ``presets`` and ``studio``.
     """
     from tests.e2e.test_osc_e2e import _socket_ready
     from tests.e2e.test_osc_e2e import start_serve as start_osc_serve
@@ -122,8 +126,10 @@ def start_serve(folder: Path, *, channels: int = 2, output: str = "null") -> Ser
     user_dir = folder / "presets"
     extra = (
         f"audio:\n  channels: {channels}\n"
-        f"presets:\n  user_dir: {json.dumps(str(user_dir))}\n  watch: true\n"
-        "studio:\n  port: 0\n"
+        + ("" if rate is None else f"  rate: {rate}\n")
+        + f"presets:\n  user_dir: {json.dumps(str(user_dir))}\n  watch: true\n"
+        + "studio:\n  port: 0\n"
+        + extra_config
     )
     env = dict(
         os.environ,
@@ -145,6 +151,25 @@ def start_serve(folder: Path, *, channels: int = 2, output: str = "null") -> Ser
     url = studio_line()
     assert url is not None and url.endswith(f"?token={token}")
     return Served(proc, port, url, token, log_path, user_dir)
+
+
+def require_browser() -> None:
+    """Skip the test when the browser is missing (fail under ``VIBSYNTH_E2E_REQUIRED=1``)."""
+    import pytest
+
+    from tests.e2e.jackutil import e2e_required
+
+    ok, reason = browser_available()
+    if not ok:
+        if e2e_required():
+            pytest.fail(reason)
+        pytest.skip(reason)
+
+
+def chromium_or_skip(width: int = 1400, height: int = 1250) -> Any:
+    """:func:`chromium` once :func:`require_browser` passes."""
+    require_browser()
+    return chromium(width, height)
 
 
 def chromium(width: int = 1400, height: int = 1250) -> Any:
@@ -169,16 +194,31 @@ def chromium(width: int = 1400, height: int = 1250) -> Any:
     return webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
 
 
-def by_testid(driver: Any, testid: str) -> Any:
+def wait(driver: Any, condition: Callable[[Any], T], what: str, timeout: float = 20.0) -> T:
+    """:func:`wait_for` on a condition of the browser: ``condition(driver)``."""
+    return wait_for(lambda: condition(driver), timeout=timeout, what=what)
+
+
+def by(testid: str) -> tuple[str, str]:
+    """Selenium locator of a ``data-testid``."""
     from selenium.webdriver.common.by import By
 
-    return driver.find_element(By.CSS_SELECTOR, f'[data-testid="{testid}"]')
+    return By.CSS_SELECTOR, f'[data-testid="{testid}"]'
+
+
+def by_testid(driver: Any, testid: str) -> Any:
+    return driver.find_element(*by(testid))
 
 
 def all_by_testid(driver: Any, testid: str) -> list[Any]:
-    from selenium.webdriver.common.by import By
+    return driver.find_elements(*by(testid))
 
-    return driver.find_elements(By.CSS_SELECTOR, f'[data-testid="{testid}"]')
+
+def visible(driver: Any, testid: str) -> Any:
+    """The one displayed element with this ``data-testid`` (some exist in several views)."""
+    shown = [e for e in all_by_testid(driver, testid) if e.is_displayed()]
+    assert len(shown) == 1, f"{len(shown)} visible elements with data-testid={testid}"
+    return shown[0]
 
 
 def open_studio(driver: Any, served: Served) -> None:

@@ -31,16 +31,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.e2e.browser import ROOT, by, chromium_or_skip, serve_studio, visible, wait
+from tests.e2e.studioutil import ROOT, by, chromium_or_skip, require_browser, start_serve, visible, wait
 from tests.research.lab.conftest import HATT_TEXTURES, RATE, hatt_recording
 
 pytestmark = [pytest.mark.e2e, pytest.mark.shared]
 
-TOKEN = "lab-e2e-token-0123456789abcdef"
-CONFIG = """version: 1
-audio:
-  rate: 8000
-bank:
+CONFIG = """bank:
   levels: 9
   loop_seconds: 1
 lab:
@@ -67,9 +63,11 @@ def lab(tmp_path_factory, hatt_psd):
             RATE,
         )
     root = tmp / "sessions"
-    with serve_studio(tmp, CONFIG.format(root=root), token=TOKEN) as studio:
-        assert {"name": "lab", "title": "Lab", "script": "/ext/lab/tab.js"} in studio.state["extensions"]
-        browser = chromium_or_skip()
+    require_browser()
+    studio = start_serve(tmp / "serve", channels=1, rate=8000, extra_config=CONFIG.format(root=root))
+    try:
+        assert {"name": "lab", "title": "Lab", "script": "/ext/lab/tab.js"} in studio.api("/api/state")["extensions"]
+        browser = chromium_or_skip(1400, 1000)
         try:
             browser.get(studio.url + "#lab")  # what `vibsynth lab` opens: the studio on its Lab tab
             wait(browser, lambda b: b.find_elements(*by("lab-protocol")), "the set-up form")
@@ -77,6 +75,8 @@ def lab(tmp_path_factory, hatt_psd):
             yield browser, root, stimuli, tmp
         finally:
             browser.quit()
+    finally:
+        studio.stop()
 
 
 def vibsynth(*args: object) -> str:

@@ -110,6 +110,7 @@ def start_serve(
 
 
 def stop_serve(proc: subprocess.Popen) -> None:
+    """Stop a ``vibsynth serve`` started by a test: SIGTERM, then SIGKILL if it hangs."""
     proc.terminate()
     try:
         proc.wait(timeout=20)

@@ -27,13 +27,12 @@ import pytest
 
 import vibsynth
 from tests.control.studio.helpers import texture_recording
-from tests.e2e.jackutil import e2e_required
 from tests.e2e.studioutil import (
-    browser_available,
     by_testid,
     chromium,
     console_errors,
     open_studio,
+    require_browser,
     start_serve,
     wait_for,
 )
@@ -47,11 +46,7 @@ TOLERANCE = 1e-5  # OSC sends float32
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
-    ok, reason = browser_available()
-    if not ok:
-        if e2e_required():
-            pytest.fail(reason)
-        pytest.skip(reason)
+    require_browser()
     service = start_serve(tmp_path_factory.mktemp("studio-e2e"))
     yield service
     service.stop()
