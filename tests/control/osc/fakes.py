@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 
 from vibsynth.control.controller import Controller, KnobLimits
-from vibsynth.control.osc.codec import Bundle, Message, decode_packet, iter_messages
+from vibsynth.control.osc.codec import Bundle, Message, decode_packet, encode_message, iter_messages
 from vibsynth.errors import PresetError
 
 
@@ -99,3 +99,8 @@ class FakePeer:
     def clear(self) -> None:
         self.sent.clear()
         self.event.clear()
+
+
+def send(handler, peer: FakePeer, address: str, *args, types: str | None = None) -> None:
+    """One OSC message from ``peer`` through ``handler`` (as raw bytes, like the socket's)."""
+    handler.handle_packet(encode_message(address, args, types), peer)

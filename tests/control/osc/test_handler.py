@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from tests.control.osc.fakes import FakePeer, make_controller
+from tests.control.osc.fakes import FakePeer, make_controller, send
 from vibsynth.control.osc import adapter as osc_adapter
 from vibsynth.control.osc import handler as osc_handler
 from vibsynth.control.osc.address import AddressSpace, compile_pattern, normalize_prefix
@@ -35,25 +35,6 @@ from vibsynth.control.osc.workers import Notifier, SyncWorker
 from vibsynth.engine.commands import Panic, SetGlide, SetKnob, SetMute
 from vibsynth.errors import ConfigError, ParameterError
 from vibsynth.settings.config import load_config
-
-
-@pytest.fixture
-def ctl():
-    return make_controller(channels=4)
-
-
-@pytest.fixture
-def handler(ctl):
-    return OscHandler(ctl, sync_worker=None)
-
-
-@pytest.fixture
-def peer():
-    return FakePeer()
-
-
-def send(handler, peer, address, *args, types=None):
-    handler.handle_packet(encode_message(address, args, types), peer)
 
 
 # ---------------------------------------------------------------------- codec

@@ -7,17 +7,11 @@ import time
 
 import pytest
 
-from tests.control.osc.fakes import FakePeer, make_controller
+from tests.control.osc.fakes import send
 from tests.control.spatial.rig import Clock, make_mixer
 from vibsynth.control import spatial
 from vibsynth.control.osc.codec import encode_bundle, encode_message, unix_to_ntp
-from vibsynth.control.osc.handler import OscHandler
 from vibsynth.control.osc.sources import NO_LAYOUT
-
-
-@pytest.fixture
-def ctl():
-    return make_controller(channels=4)
 
 
 @pytest.fixture
@@ -31,20 +25,6 @@ def mixer(ctl, basis, clock):
     spatial.attach(ctl, mixer)  # findable, stepped by hand (no thread)
     yield mixer
     spatial.detach(ctl, mixer)
-
-
-@pytest.fixture
-def handler(ctl):
-    return OscHandler(ctl, sync_worker=None)
-
-
-@pytest.fixture
-def peer():
-    return FakePeer()
-
-
-def send(handler, peer, address, *args, types=None):
-    handler.handle_packet(encode_message(address, args, types), peer)
 
 
 def view(mixer, k):
