@@ -22,6 +22,7 @@ from typing import Any
 from aiohttp import web
 
 from vibsynth import __version__
+from vibsynth.control.studio.periodic import WhilePagesOpen
 from vibsynth.errors import PresetError
 from vibsynth.settings.models_preset import NAME_PATTERN, NAME_RULE, PRESET_VERSION, PresetModel
 from vibsynth.settings.presets import Preset, preset_from_data
@@ -102,7 +103,7 @@ class PresetsPanel:
         self.server = server
         self.library = library
         self._seen: Any = None
-        self._timer: asyncio.TimerHandle | None = None
+        self._poll = WhilePagesOpen(POLL_S, self._tick)
         self.schema = form_schema()
         server.on_pages_changed(self._pages_changed)
 
@@ -135,16 +136,11 @@ class PresetsPanel:
     # ------------------------------------------------------------------ hot reload
     def _pages_changed(self, pages: int) -> None:
         self._seen = None  # a page that just came gets the listing at the next tick
-        if pages and self._timer is None:
-            self._tick()
-        elif not pages and self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
+        self._poll.pages_changed(pages)
 
     def _tick(self) -> None:
         if self._signature() != self._seen:
             self.push()
-        self._timer = asyncio.get_running_loop().call_later(POLL_S, self._tick)
 
     # ------------------------------------------------------------------ routes
     def add_routes(self, app: web.Application) -> None:

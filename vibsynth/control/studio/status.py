@@ -8,7 +8,6 @@ Served at ``GET /api/status`` and pushed to open pages once a second.
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -16,6 +15,7 @@ from aiohttp import web
 
 from vibsynth.control.midi import learn_hook
 from vibsynth.control.status import channel_status, engine_status, output_status
+from vibsynth.control.studio.periodic import WhilePagesOpen
 from vibsynth.engine.supervisor import STREAMING
 
 __all__ = ["PUSH_PERIOD_S", "StatusPanel", "midi_learn", "status_sources", "studio_status"]
@@ -139,8 +139,7 @@ class StatusPanel:
     def __init__(self, server: Any, servers: Sequence[Any] = ()) -> None:
         self.server = server
         self.servers = tuple(servers)
-        self._timer: asyncio.TimerHandle | None = None
-        server.on_pages_changed(self._pages_changed)
+        server.on_pages_changed(WhilePagesOpen(PUSH_PERIOD_S, self._push).pages_changed)
 
     def status(self) -> dict[str, Any]:
         server = self.server
@@ -164,13 +163,5 @@ class StatusPanel:
     def stop(self) -> None:
         """Nothing to stop: the push timer ends with the studio's loop."""
 
-    def _pages_changed(self, pages: int) -> None:
-        if pages and self._timer is None:
-            self._tick()
-        elif not pages and self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-
-    def _tick(self) -> None:
+    def _push(self) -> None:
         self.server.post(("status",), self.status())
-        self._timer = asyncio.get_running_loop().call_later(PUSH_PERIOD_S, self._tick)
