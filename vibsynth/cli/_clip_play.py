@@ -19,6 +19,7 @@ from vibsynth.cli._common import integer_in, number_in
 from vibsynth.cli._server import add_server_arguments, server_address
 from vibsynth.control.clips.timeline import GAIN_MAX, LOOPS_MAX, RATE_MAX, RATE_MIN
 from vibsynth.errors import NoReplyError, ParameterError
+from vibsynth.settings.models_config import MAX_CHANNELS
 
 __all__ = ["add_clip_play_arguments", "add_clip_play_parsers"]
 
@@ -60,6 +61,16 @@ def add_clip_play_arguments(parser: argparse.ArgumentParser, *, rate_flag: str =
     )
 
 
+def _add_channel(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--channel",
+        type=integer_in(1, MAX_CHANNELS, what="--channel"),
+        default=None,
+        metavar="N",
+        help="1-based; default every channel",
+    )
+
+
 def add_clip_play_parsers(sub: Any) -> None:
     """Add ``play`` and ``stop`` to the ``vibsynth clip`` sub-parsers."""
     p = sub.add_parser(
@@ -69,13 +80,7 @@ def add_clip_play_parsers(sub: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("name", metavar="NAME", help="clip name (vibsynth clip list)")
-    p.add_argument(
-        "--channel",
-        type=integer_in(1, 64, what="--channel"),
-        default=None,
-        metavar="N",
-        help="1-based; default every channel",
-    )
+    _add_channel(p)
     add_clip_play_arguments(p, rate_flag="--rate")
     p.add_argument(
         "--at",
@@ -87,13 +92,7 @@ def add_clip_play_parsers(sub: Any) -> None:
     add_server_arguments(p)
     p.set_defaults(func=run_play)
     p = sub.add_parser("stop", help="stop the clip playing on a running server; the channel glides back")
-    p.add_argument(
-        "--channel",
-        type=integer_in(1, 64, what="--channel"),
-        default=None,
-        metavar="N",
-        help="1-based; default every channel",
-    )
+    _add_channel(p)
     p.add_argument(
         "--release",
         type=number_in(0.0, 10000.0),
