@@ -37,7 +37,7 @@ from vibsynth.control.osc.codec import (
     iter_messages,
     ntp_to_unix,
 )
-from vibsynth.control.osc.monitor import MonitorWorker
+from vibsynth.control.osc.monitor import MonitorWorker, describe_message, describe_sender
 from vibsynth.control.osc.replies import (
     REPLY_AMPLIFICATION,
     ReplyBudget,
@@ -295,7 +295,7 @@ class OscHandler:
         if isinstance(peer, ReplyBudget):
             peer.request = msg.address
         if self.tap.active:
-            self.tap.publish("osc", partial(describe_message, msg, peer, at_frame))
+            self.tap.publish("osc", partial(describe_message, msg, _sender(peer), at_frame))
         try:
             routes = self.space.match(msg.address)
         except ParameterError as exc:
@@ -618,24 +618,4 @@ class OscHandler:
 
 
 def _sender(peer: PeerLike) -> str:
-    address = getattr(peer, "address", None)
-    if not address:
-        return "?"
-    return f"{'tcp' if not getattr(peer, 'datagram', True) else 'udp'} {address[0]}:{address[1]}"
-
-
-def _show_arg(value: object) -> str:
-    if isinstance(value, str):
-        return '"' + (value if len(value) <= 64 else value[:63] + "…") + '"'
-    if isinstance(value, (bytes, bytearray)):
-        return f"<blob {len(value)} bytes>"
-    if isinstance(value, float):
-        return f"{value:g}"
-    return str(value)
-
-
-def describe_message(msg: Message, peer: PeerLike, at_frame: int | None = None) -> str:
-    """One line for a monitor, like oscdump: ``/vibsynth/ch/1/intensity f 0.5  (udp 127.0.0.1:5000)``."""
-    args = " ".join(_show_arg(a) for a in msg.args[:16]) + (" …" if len(msg.args) > 16 else "")
-    when = f" at frame {at_frame}" if at_frame is not None else ""
-    return f"{msg.address} {msg.types} {args}".rstrip() + f"  ({_sender(peer)}{when})"
+    return describe_sender(getattr(peer, "address", None), getattr(peer, "datagram", True))

@@ -19,18 +19,48 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from vibsynth.control.osc.codec import IMMEDIATE, encode_bundle, encode_message
+from vibsynth.control.osc.codec import IMMEDIATE, Message, encode_bundle, encode_message
 from vibsynth.control.osc.workers import PeerLike
 from vibsynth.control.tap import InputTap
 from vibsynth.errors import VibsynthError
 
-__all__ = ["MonitorWorker", "MAX_SUBSCRIBERS", "LEASE_S", "PUSH_PERIOD_S"]
+__all__ = ["MonitorWorker", "MAX_SUBSCRIBERS", "LEASE_S", "PUSH_PERIOD_S", "describe_message", "describe_sender"]
 
 MAX_SUBSCRIBERS = 8
 LEASE_S = 30.0
 PUSH_PERIOD_S = 0.05
 #: Events per pushed bundle (each at most ~350 bytes: a bundle stays far below a datagram's 64 KiB).
 EVENTS_PER_PUSH = 64
+#: Arguments shown of one message (the rest is ``…``).
+ARGS_SHOWN = 16
+
+
+def describe_sender(address: tuple[str, int] | None, datagram: bool = True) -> str:
+    """``udp 127.0.0.1:5000`` (``tcp ...`` for a stream peer; ``?`` when unknown)."""
+    if not address:
+        return "?"
+    return f"{'udp' if datagram else 'tcp'} {address[0]}:{address[1]}"
+
+
+def _show_arg(value: object) -> str:
+    if isinstance(value, str):
+        return '"' + (value if len(value) <= 64 else value[:63] + "…") + '"'
+    if isinstance(value, (bytes, bytearray)):
+        return f"<blob {len(value)} bytes>"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def describe_message(msg: Message, sender: str, at_frame: int | None = None) -> str:
+    """One monitor line, as received (like oscdump): ``/vibsynth/intensity f 0.5  (udp 127.0.0.1:5000)``.
+
+    The address and type tags are the sender's, untouched (a global address is not expanded
+    into the channels it reaches); ``sender`` comes from :func:`describe_sender`.
+    """
+    args = " ".join(_show_arg(a) for a in msg.args[:ARGS_SHOWN]) + (" …" if len(msg.args) > ARGS_SHOWN else "")
+    when = f" at frame {at_frame}" if at_frame is not None else ""
+    return f"{msg.address} {msg.types} {args}".rstrip() + f"  ({sender}{when})"
 
 
 @dataclass
