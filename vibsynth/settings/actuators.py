@@ -10,13 +10,26 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from pydantic_core import PydanticCustomError
+
 from vibsynth.errors import ConfigError
-from vibsynth.settings.config import Config, settings_of, user_config_file
+from vibsynth.settings.fields import cross_problem
+from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import ActuatorProfileModel
+from vibsynth.settings.paths import user_config_file
+from vibsynth.settings.typed import settings_of
 from vibsynth.settings.validation import did_you_mean, model_spec, validate
 from vibsynth.settings.yamldoc import read_yaml_file
 
-__all__ = ["ACTUATOR_RESOURCE", "named_files", "user_profile_dir", "actuator_profiles", "load_actuator_profile"]
+__all__ = [
+    "ACTUATOR_RESOURCE",
+    "named_files",
+    "user_profile_dir",
+    "actuator_profiles",
+    "load_actuator_profile",
+    "resolve_actuator_response",
+    "profile_problem",
+]
 
 ACTUATOR_RESOURCE = "config/actuators"
 
@@ -91,11 +104,30 @@ def load_actuator_profile(name: str) -> dict[str, Any]:
     }
 
 
-def resolve_actuator_response(config: Config | Any) -> list[tuple[float, float]]:
+def profile_problem(config: VibsynthConfig) -> PydanticCustomError | None:
+    """``actuator.profile`` names no profile file (when no explicit ``actuator.response`` wins), or None.
+
+    One of the loader's file checks (:data:`~vibsynth.settings.models_config.FILE_CHECKS`).
+    """
+    profile = config.actuator.profile
+    if profile is None or config.actuator.response is not None:
+        return None
+    names = actuator_profiles()
+    if profile in names:
+        return None
+    return cross_problem(
+        f"actuator.profile = {profile!r}: no such profile (allowed: "
+        f"{', '.join(sorted(names)) or 'none found'}, or null; user profiles go in {user_profile_dir()})",
+        "actuator.profile",
+    )
+
+
+def resolve_actuator_response(config: VibsynthConfig | Any) -> list[tuple[float, float]]:
     """The actuator response points ``[(Hz, dB), ...]`` to equalise for.
 
     An explicit ``actuator.response`` wins; else the points of ``actuator.profile``;
-    else (profile null) an empty list (flat).
+    else (profile null) an empty list (flat). ``config``: the typed settings, or a config
+    (see :func:`~vibsynth.settings.typed.settings_of`).
     """
     actuator = settings_of(config).actuator
     if actuator.response is not None:

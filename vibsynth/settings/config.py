@@ -41,8 +41,12 @@ from pathlib import Path
 from typing import Any
 
 from vibsynth.errors import ConfigError
+from vibsynth.settings.actuators import profile_problem
 from vibsynth.settings.fields import show
-from vibsynth.settings.models_config import CONFIG_VERSION, VibsynthConfig
+from vibsynth.settings.layouts import layout_problem
+from vibsynth.settings.models_config import CONFIG_VERSION, FILE_CHECKS, VibsynthConfig
+from vibsynth.settings.paths import APP_NAME, user_config_file
+from vibsynth.settings.typed import settings_of
 from vibsynth.settings.validation import FixedLocator, Locator, did_you_mean, model_spec, validate
 from vibsynth.settings.yamldoc import Path_, YamlDocument, parse_yaml, read_yaml_file, yaml_value
 
@@ -66,7 +70,6 @@ __all__ = [
 
 DEFAULT_CONFIG_RESOURCE = "config/default.yaml"
 DEFAULT_CONFIG_NAME = "vibsynth/data/" + DEFAULT_CONFIG_RESOURCE
-APP_NAME = "vibsynth"
 
 #: Environment variables (per-run settings) -> dotted config key.
 ENV_VARS: dict[str, str] = {
@@ -80,6 +83,8 @@ ENV_VARS: dict[str, str] = {
     "VIBSYNTH_MIDI_PORT": "midi.port",
     "VIBSYNTH_PRESETS_DIR": "presets.user_dir",
 }
+#: The rules that read files a config names, checked when a config is loaded (not by ``settings_of``).
+_FILE_CHECKS = (layout_problem, profile_problem)
 #: Environment variable naming the user config file (``--config`` wins over it).
 CONFIG_ENV_VAR = "VIBSYNTH_CONFIG"
 
@@ -208,40 +213,6 @@ class Config:
         return _leaves(self.data)
 
 
-def settings_of(config: Any) -> VibsynthConfig:
-    """The typed settings of a config's current ``.data`` (or of a plain config dict), validated now.
-
-    For code that receives a :class:`Config` (or anything with a ``.data`` dict, such as a test's
-    namespace) and must see what is in ``data`` now, even if it was changed after loading;
-    :attr:`Config.settings` is the model made when the config was loaded. Missing keys take their
-    defaults; the actuator profile is not looked up.
-
-    Raises
-    ------
-    ConfigError
-        ``config: osc.port = 70000: outside the allowed range [0, 65535]``.
-    """
-    if isinstance(config, VibsynthConfig):
-        return config
-    data = getattr(config, "data", config)
-    result: VibsynthConfig = validate(
-        model_spec(VibsynthConfig), data or {}, FixedLocator("config"), ConfigError, context={"check_files": False}
-    )
-    return result
-
-
-def user_config_file() -> Path:
-    """The platform user config file (``config.yaml`` in the platform config folder).
-
-    Linux: ``~/.config/vibsynth/config.yaml`` (``$XDG_CONFIG_HOME``); macOS:
-    ``~/Library/Application Support/vibsynth/config.yaml``; Windows:
-    ``%LOCALAPPDATA%\\vibsynth\\config.yaml``.
-    """
-    import platformdirs
-
-    return Path(platformdirs.user_config_dir(APP_NAME, appauthor=False)) / "config.yaml"
-
-
 def _parse_env_value(name: str, text: str) -> Any:
     value = yaml_value(text, f"environment variable {name}")
     return text if isinstance(value, (dict, list)) else value
@@ -272,7 +243,9 @@ class _Layers:
             chosen = next((k for k in keys if not self.sources.get(k, "default").startswith("default")), keys[0])
             return chosen, FixedLocator(self.sources.get(chosen, "config"))
 
-        model: VibsynthConfig = validate(self.spec, self.data, FixedLocator("config"), ConfigError, blame=blame)
+        model: VibsynthConfig = validate(
+            self.spec, self.data, FixedLocator("config"), ConfigError, context={FILE_CHECKS: _FILE_CHECKS}, blame=blame
+        )
         for dotted in self.spec.leaves:  # values the model reads differently (audio.backend: null is "null")
             parts = dotted.split(".")
             node: Any = self.data

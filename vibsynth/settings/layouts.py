@@ -18,9 +18,10 @@ from pydantic_core import PydanticCustomError
 
 from vibsynth.errors import ConfigError
 from vibsynth.settings.actuators import named_files
-from vibsynth.settings.config import Config, settings_of, user_config_file
 from vibsynth.settings.fields import SettingsModel, cross_problem, setting
 from vibsynth.settings.models_config import PROFILE_NAME, ChannelPosition, VibsynthConfig, check_layout
+from vibsynth.settings.paths import user_config_file
+from vibsynth.settings.typed import settings_of
 from vibsynth.settings.validation import did_you_mean, model_spec, validate
 from vibsynth.settings.yamldoc import read_yaml_file
 
@@ -138,8 +139,11 @@ def load_layout(name: str) -> LayoutFileModel:
     return read_layout_file(files[name], name)
 
 
-def resolve_layout(config: Config | Any) -> Layout | None:
-    """The config's layout with every position (a named layout's file is read), or None without one."""
+def resolve_layout(config: VibsynthConfig | Any) -> Layout | None:
+    """The config's layout with every position (a named layout's file is read), or None without one.
+
+    ``config``: the typed settings, or a config (see :func:`~vibsynth.settings.typed.settings_of`).
+    """
     value = settings_of(config).layout
     if value is None:
         return None
@@ -148,33 +152,29 @@ def resolve_layout(config: Config | Any) -> Layout | None:
     return Layout(value)
 
 
-def layout_problem(config: VibsynthConfig, check_files: bool) -> PydanticCustomError | None:
-    """The rule between ``layout`` and ``audio.channels`` broken by ``config``, if any.
+def layout_problem(config: VibsynthConfig) -> PydanticCustomError | None:
+    """The rule between a named layout's file and ``audio.channels`` broken by ``config``, if any.
 
-    A named layout is looked up (and its file read and checked) only with ``check_files``; a
-    broken layout file raises its own :class:`ConfigError` naming the file and line.
+    One of the loader's file checks (:data:`~vibsynth.settings.models_config.FILE_CHECKS`); an
+    inline layout is checked by the model itself. A broken layout file raises its own
+    :class:`ConfigError` naming the file and line.
     """
     value = config.layout
-    if value is None or (isinstance(value, str) and not check_files):
+    if not isinstance(value, str):
         return None
     channels = config.audio.channels
-    if isinstance(value, str):
-        files = layout_files()
-        if value not in files:
-            return cross_problem(
-                f"layout = {value!r}: no such layout{did_you_mean(value, list(files))} (allowed: "
-                f"{', '.join(sorted(files)) or 'none found'}, a mapping of positions, or null; user layouts go "
-                f"in {user_layout_dir()})",
-                "layout",
-            )
-        top = max(read_layout_file(files[value], value).channels)
-        what = f"layout {value} places channel {top}"
-    else:
-        top = max(value)
-        what = f"layout: channel {top} is placed"
+    files = layout_files()
+    if value not in files:
+        return cross_problem(
+            f"layout = {value!r}: no such layout{did_you_mean(value, list(files))} (allowed: "
+            f"{', '.join(sorted(files)) or 'none found'}, a mapping of positions, or null; user layouts go "
+            f"in {user_layout_dir()})",
+            "layout",
+        )
+    top = max(read_layout_file(files[value], value).channels)
     if top > channels:
         return cross_problem(
-            f"{what} but audio.channels = {channels} (allowed: channels 1..{channels})",
+            f"layout {value} places channel {top} but audio.channels = {channels} (allowed: channels 1..{channels})",
             "layout",
             "audio.channels",
         )

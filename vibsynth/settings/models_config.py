@@ -8,9 +8,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
 from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, ValidationInfo, model_validator
+from pydantic_core import PydanticCustomError
 
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
@@ -54,6 +56,9 @@ __all__ = [
     "Presets",
     "ChannelPosition",
     "check_layout",
+    "inline_layout_problem",
+    "FILE_CHECKS",
+    "FileCheck",
     "VibsynthConfig",
 ]
 
@@ -349,6 +354,32 @@ def check_layout(value: Any) -> Any:
     return value
 
 
+def inline_layout_problem(config: VibsynthConfig) -> PydanticCustomError | None:
+    """The rule between an inline layout (positions) and ``audio.channels`` broken by ``config``, if any.
+
+    A named layout is checked against its file by the loader (:data:`FILE_CHECKS`), not here.
+    """
+    value = config.layout
+    if not isinstance(value, dict):
+        return None
+    top = max(value)
+    channels = config.audio.channels
+    if top > channels:
+        return cross_problem(
+            f"layout: channel {top} is placed but audio.channels = {channels} (allowed: channels 1..{channels})",
+            "layout",
+            "audio.channels",
+        )
+    return None
+
+
+#: A rule that reads files named by the config (a layout, an actuator profile): the problem, or None.
+FileCheck = Callable[["VibsynthConfig"], "PydanticCustomError | None"]
+#: Validation context key: the :data:`FileCheck` s to run after the rules between keys. The models
+#: read no files; the loader (:mod:`vibsynth.settings.config`) passes the checks of the files it knows.
+FILE_CHECKS = "file_checks"
+
+
 def _layout_kind(value: Any) -> str:
     """Which form a layout has: a name (string) or positions (a mapping); only that form's errors are shown."""
     return "name" if isinstance(value, str) else "positions"
@@ -450,22 +481,11 @@ class VibsynthConfig(SettingsModel):
                     "midi_clips.notes",
                     "audio.channels",
                 )
-        from vibsynth.settings.layouts import layout_problem  # it reads layout files, checked by this model
-
-        spatial_error = layout_problem(self, bool(context.get("check_files", True))) or knob_conflict(
-            self.sources, self.midi.mapping
-        )
+        spatial_error = inline_layout_problem(self) or knob_conflict(self.sources, self.midi.mapping)
         if spatial_error is not None:
             raise spatial_error
-        profile = self.actuator.profile
-        if profile is not None and self.actuator.response is None and context.get("check_files", True):
-            from vibsynth.settings.actuators import actuator_profiles, user_profile_dir  # they read this model
-
-            names = actuator_profiles()
-            if profile not in names:
-                raise cross_problem(
-                    f"actuator.profile = {profile!r}: no such profile (allowed: "
-                    f"{', '.join(sorted(names)) or 'none found'}, or null; user profiles go in {user_profile_dir()})",
-                    "actuator.profile",
-                )
+        for check in context.get(FILE_CHECKS, ()):
+            file_error = check(self)
+            if file_error is not None:
+                raise file_error
         return self
