@@ -9,7 +9,8 @@ import pytest
 from tests.formats.haptic_samples import ahap, curve, event, meta
 from vibsynth.cli import main
 from vibsynth.formats.ahap import read_ahap
-from vibsynth.settings.clips import load_clip
+from vibsynth.formats.meta_haptic import read_meta_haptic
+from vibsynth.settings.clips import load_clip, shipped_clips_dir
 from vibsynth.settings.config import ENV_VARS
 
 BOING = ahap(
@@ -140,3 +141,23 @@ def test_schema_is_the_clip_schema(capsys):
     code, out, _ = run(capsys, "clip", "schema")
     schema = json.loads(out)
     assert code == 0 and schema["title"] == "vibsynth haptic clip" and "keyframes" in schema["required"]
+
+
+def test_export_meta_haptic_and_import_it_back(tmp_path, capsys, isolated):
+    code, out, err = run(capsys, "clip", "export", "impact", "--format", "haptic")
+    assert code == 0 and out.startswith("wrote impact.haptic: 320 ms") and "as Meta .haptic" in out
+    assert "Meta .haptic transients have a fixed shape" in err
+    design = read_meta_haptic(tmp_path / "impact.haptic")
+    assert design.taps[0].t == 0.0 and design.taps[0].intensity == pytest.approx(1.0)
+    code, out, _ = run(capsys, "clip", "import", str(tmp_path / "impact.haptic"), "--name", "impact2")
+    assert code == 0
+    back, clip = load_clip(isolated / "impact2.yaml"), load_clip(shipped_clips_dir() / "impact.yaml")
+    for t in range(0, 320, 7):
+        assert back.value_at(t) == pytest.approx(clip.value_at(t), abs=0.005)
+    code, out, _ = run(capsys, "clip", "export", "impact", "--format", "haptic", "-o", "-")
+    assert json.loads(out)["signals"]["continuous"]["envelopes"]["amplitude"][0]["time"] == 0
+    code, _, err = run(capsys, "clip", "export", "impact", "--format", "haptic")
+    assert code == 1 and "exists already" in err
+    blocked = tmp_path / "impact.haptic" / "x.haptic"  # its folder is a file
+    code, _, err = run(capsys, "clip", "export", "impact", "--format", "haptic", "-o", str(blocked))
+    assert code == 1 and err.startswith("vibsynth: error: ") and "cannot write" in err and err.count("\n") == 1

@@ -162,31 +162,52 @@ def _clip_for_export(library: ClipLibrary, ref: str) -> Clip:
     return _get(library, ref)
 
 
+def _ahap_text(design: HapticDesign, clip: Clip) -> str:
+    from vibsynth.formats.ahap import ahap_text
+
+    return ahap_text(design)
+
+
+def _haptic_text(design: HapticDesign, clip: Clip) -> str:
+    from vibsynth.formats.meta_haptic import meta_haptic_text
+
+    return meta_haptic_text(design, source=f"vibsynth clip {clip.name}")
+
+
+#: Export format -> (text writer, name in messages); the suffix is the format's name.
+EXPORTERS = {"ahap": (_ahap_text, "AHAP"), "haptic": (_haptic_text, "Meta .haptic")}
+
+
 def cmd_export(args: argparse.Namespace) -> int:
-    from vibsynth.formats.ahap import ahap_text, write_ahap
+    from vibsynth.formats.files import atomic_write
 
     config, library = _library(args)
     clip = _clip_for_export(library, args.name)
     design = design_from_clip(clip, ClipMapping.from_config(config))
+    to_text, label = EXPORTERS[args.format]
+    text = to_text(design, clip)
     if args.output is not None and str(args.output) == "-":
-        sys.stdout.write(ahap_text(design))
-        _note_decay(clip)
+        sys.stdout.write(text)
+        _note_decay(clip, label)
         return 0
-    target = args.output if args.output is not None else Path(f"{clip.name}.ahap")
+    target = args.output if args.output is not None else Path(f"{clip.name}.{args.format}")
     if target.is_dir():
-        target = target / f"{clip.name}.ahap"
+        target = target / f"{clip.name}.{args.format}"
     if target.exists() and not args.force:
         raise ClipError(f"{target}: exists already (use --force to replace it)")
-    write_ahap(design, target)
-    print(f"wrote {target}: {_summary(clip)} as AHAP")
-    _note_decay(clip)
+    try:
+        atomic_write(target, text)
+    except OSError as exc:
+        raise ClipError(f"{target}: cannot write ({exc.strerror})") from None
+    print(f"wrote {target}: {_summary(clip)} as {label}")
+    _note_decay(clip, label)
     return 0
 
 
-def _note_decay(clip: Clip) -> None:
+def _note_decay(clip: Clip, label: str) -> None:
     if clip.transients:
         print(
-            f"vibsynth: note: {clip.name}: AHAP transients have a fixed shape; their decay_ms is not exported",
+            f"vibsynth: note: {clip.name}: {label} transients have a fixed shape; their decay_ms is not exported",
             file=sys.stderr,
         )
 
@@ -203,7 +224,7 @@ def register(subparsers: Any) -> None:
     """Add ``vibsynth clip ...``."""
     parser = subparsers.add_parser(
         "clip",
-        help="haptic clips: list, show, validate, import from AHAP / Meta .haptic, export to AHAP, play",
+        help="haptic clips: list, show, validate, import/export AHAP and Meta .haptic, from-audio, play",
         description="Haptic clips: timelines of the two knobs in YAML files (docs/clips.md). "
         "User clips override shipped ones of the same name.",
     )
@@ -239,11 +260,18 @@ def register(subparsers: Any) -> None:
     p.add_argument("--force", action="store_true", help="replace an existing clip file")
     p.set_defaults(func=cmd_import)
 
-    p = sub.add_parser("export", help="write a clip as an Apple Core Haptics AHAP file")
+    p = sub.add_parser(
+        "export",
+        help="write a clip as an Apple Core Haptics AHAP or a Meta Haptics Studio .haptic file",
+        description="Export a clip for another tool; the inverse of the import mapping (clips: settings, "
+        "docs/clips.md), so importing the file back gives the clip within 0.005 of every value.",
+    )
     add_config_arguments(p)
     p.add_argument("name", help="clip name, or a clip file path (FILE.yaml)")
-    p.add_argument("--format", choices=("ahap",), default="ahap", help="output format (AHAP)")
-    p.add_argument("-o", "--output", type=Path, help="output file or folder (default: NAME.ahap here; - = stdout)")
+    p.add_argument("--format", choices=sorted(EXPORTERS), default="ahap", help="ahap (Apple, default) or haptic (Meta)")
+    p.add_argument(
+        "-o", "--output", type=Path, help="output file or folder (default: NAME.ahap / NAME.haptic here; - = stdout)"
+    )
     p.add_argument("--force", action="store_true", help="replace an existing file")
     p.set_defaults(func=cmd_export)
 

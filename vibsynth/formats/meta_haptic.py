@@ -1,5 +1,5 @@
 """Meta Haptics Studio ``.haptic`` files (the Lofelt haptic data model, version 1): read into a
-:class:`HapticDesign`.
+:class:`HapticDesign`, and written from one.
 
 What is read::
 
@@ -16,10 +16,20 @@ must not decrease (two breakpoints at the same time are a step). Before the firs
 breakpoint the signal is silent; the frequency envelope holds its first and last values outside
 its breakpoints (0.5 where there is none). An emphasis is a tap at its breakpoint's time. The clip
 ends at the last breakpoint of either envelope.
+
+Writing (:func:`meta_haptic_data`) is the inverse, so that :func:`parse_meta_haptic` reads back the
+design it was given: each segment's start and end become amplitude and frequency breakpoints
+(a step is two breakpoints at the same time; a breakpoint a straight line through its neighbours
+already passes is left out), and each tap becomes the emphasis of an amplitude breakpoint at its
+time (one is added on the envelope where none is). An emphasis amplitude below the envelope's at
+its time is raised to it: Meta plays an emphasis *on top of* the envelope, and a vibsynth
+transient never dips below the curve either (``max(curve, transient)``), so nothing heard
+changes. Of two taps at the same time (after rounding to the microsecond) the stronger is kept.
 """
 
 from __future__ import annotations
 
+import json
 import os
 from bisect import bisect_left, bisect_right
 from pathlib import Path
@@ -29,7 +39,15 @@ from vibsynth.errors import ClipError
 from vibsynth.formats.haptic_design import HapticDesign, Segment, Tap
 from vibsynth.formats.jsonio import JsonFields, JsonPath, load_json, parse_json
 
-__all__ = ["MAX_HAPTIC_BYTES", "MAX_BREAKPOINTS", "MAX_TIME_S", "read_meta_haptic", "parse_meta_haptic"]
+__all__ = [
+    "MAX_HAPTIC_BYTES",
+    "MAX_BREAKPOINTS",
+    "MAX_TIME_S",
+    "read_meta_haptic",
+    "parse_meta_haptic",
+    "meta_haptic_data",
+    "meta_haptic_text",
+]
 
 #: ``.haptic`` files over this size are refused before they are read (a 35 s clip is ~200 KB).
 MAX_HAPTIC_BYTES = 4 << 20
@@ -160,3 +178,93 @@ def read_meta_haptic(path: str | os.PathLike[str]) -> HapticDesign:
     """
     p = Path(path)
     return _from_data(load_json(p, error=ClipError, what=WHAT, max_bytes=MAX_HAPTIC_BYTES), str(p))
+
+
+# --------------------------------------------------------------------------- writing
+def _r(x: float) -> float:
+    """Times and values as written: 6 decimals (a microsecond), no ``-0.0``."""
+    return round(float(x), 6) + 0.0
+
+
+def _breakpoints(segments: tuple[Segment, ...], start: str, end: str) -> list[tuple[float, float]]:
+    """(time, value) breakpoints of one envelope (the segments' ``start``/``end`` values): a step is two."""
+    points: list[tuple[float, float]] = []
+    for seg in segments:
+        a, b = (_r(seg.t0), _r(getattr(seg, start))), (_r(seg.t1), _r(getattr(seg, end)))
+        if not points or points[-1] != a:
+            points.append(a)
+        points.append(b)
+    return _pruned(points)
+
+
+def _pruned(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Leave out breakpoints on the straight line through their neighbours (never one side of a step)."""
+    out: list[tuple[float, float]] = []
+    for t, v in points:
+        if len(out) >= 2:
+            (ta, va), (tb, vb) = out[-2], out[-1]
+            if ta < tb < t and abs(va + (v - va) * (tb - ta) / (t - ta) - vb) <= 1e-9:
+                out[-1] = (t, v)
+                continue
+        out.append((t, v))
+    return out
+
+
+def _value(points: list[tuple[float, float]], t: float) -> float:
+    """The envelope at ``t`` (right-continuous at a step; held outside)."""
+    times = [p[0] for p in points]
+    return _at(points, times, t, left=False, before=points[0][1])
+
+
+def _with_emphasis(amplitude: list[tuple[float, float]], taps: tuple[Tap, ...]) -> list[dict[str, Any]]:
+    """Amplitude breakpoints as written, each tap the emphasis of the (last) breakpoint at its time."""
+    strongest: dict[float, Tap] = {}
+    for tap in taps:
+        t = _r(tap.t)
+        if t not in strongest or tap.intensity > strongest[t].intensity:
+            strongest[t] = tap
+    have = {t for t, _ in amplitude}
+    points = amplitude + [(t, _r(_value(amplitude, t))) for t in sorted(strongest) if t not in have]
+    points.sort(key=lambda p: p[0])  # stable: the two sides of a step keep their order
+    out: list[dict[str, Any]] = [{"time": t, "amplitude": v} for t, v in points]
+    for k, item in enumerate(out):
+        hit = strongest.get(item["time"])
+        if hit is not None and (k + 1 == len(out) or out[k + 1]["time"] != item["time"]):
+            item["emphasis"] = {"amplitude": _r(max(hit.intensity, item["amplitude"])), "frequency": _r(hit.sharpness)}
+    return out
+
+
+def meta_haptic_data(design: HapticDesign, *, description: str = "", source: str = "") -> dict[str, Any]:
+    """A ``.haptic`` document (plain data) that :func:`parse_meta_haptic` reads back as ``design``.
+
+    See the module notes for the mapping. A design without segments (taps only) gets a silent
+    amplitude envelope over its duration to carry the emphasis.
+
+    Raises
+    ------
+    ClipError
+        The design is longer than :data:`MAX_TIME_S` or needs more than :data:`MAX_BREAKPOINTS`.
+    """
+    if design.duration_s > MAX_TIME_S:
+        raise ClipError(f"a .haptic file holds at most {MAX_TIME_S:g} s; this design lasts {design.duration_s:g} s")
+    segments = design.segments or (Segment(0.0, max(design.duration_s, 0.0), 0.0, 0.0, 0.5, 0.5),)
+    amplitude = _with_emphasis(_breakpoints(segments, "i0", "i1"), design.taps)
+    frequency = [{"time": t, "frequency": v} for t, v in _breakpoints(segments, "s0", "s1")]
+    if len(amplitude) + len(frequency) > MAX_BREAKPOINTS:
+        raise ClipError(f"the design needs more than {MAX_BREAKPOINTS:,} breakpoints; a .haptic reader takes no more")
+    metadata: dict[str, Any] = {"editor": "vibsynth", "description": description or design.description}
+    if source:
+        metadata["source"] = source
+    if design.tags:
+        metadata["tags"] = list(design.tags)
+    return {
+        "version": {"major": 1, "minor": 0, "patch": 0},
+        "metadata": metadata,
+        "signals": {"continuous": {"envelopes": {"amplitude": amplitude, "frequency": frequency}}},
+    }
+
+
+def meta_haptic_text(design: HapticDesign, *, description: str = "", source: str = "") -> str:
+    """``.haptic`` JSON text of a design (see :func:`meta_haptic_data`)."""
+    data = meta_haptic_data(design, description=description, source=source)
+    return json.dumps(data, indent=2, allow_nan=False) + "\n"
