@@ -1,6 +1,7 @@
 """Build the compiled parts; everything else is in pyproject.toml.
 
 * ``vibsynth.engine._core``: the real-time core (callback, mix, command ring, scheduler).
+* ``vibsynth.engine._input``: the real-time input ring and its PortAudio callback.
 * ``vibsynth.control.osc._fast``: the OSC UDP receive loop and its fast path.
 """
 
@@ -25,7 +26,12 @@ class BuildExt(build_ext):
 
 setup(
     ext_modules=[
-        Extension("vibsynth.engine._core", ["vibsynth/engine/_core.c"], depends=["vibsynth/engine/_core_api.h"]),
+        Extension(
+            "vibsynth.engine._core",
+            ["vibsynth/engine/_core.c"],
+            depends=["vibsynth/engine/_core_api.h", "vibsynth/engine/_rt.h"],
+        ),
+        Extension("vibsynth.engine._input", ["vibsynth/engine/_input.c"], depends=["vibsynth/engine/_rt.h"]),
         Extension(
             "vibsynth.control.osc._fast",
             ["vibsynth/control/osc/_fast.c"],

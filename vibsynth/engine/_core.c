@@ -46,27 +46,7 @@
 #include <string.h>
 
 #include "_core_api.h"
-
-#ifdef _WIN32
-#include <windows.h>
-#else
-#include <time.h>
-#endif
-
-#if defined(__GNUC__) || defined(__clang__)
-#define LOAD_ACQ(p) __atomic_load_n((p), __ATOMIC_ACQUIRE)
-#define STORE_REL(p, v) __atomic_store_n((p), (v), __ATOMIC_RELEASE)
-#define LOAD_RLX(p) __atomic_load_n((p), __ATOMIC_RELAXED)
-#define STORE_RLX(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
-#define FETCH_ADD(p, v) __atomic_fetch_add((p), (v), __ATOMIC_ACQ_REL)
-#else /* MSVC on x86/x64: aligned 64-bit accesses are atomic; barriers stop compiler reordering */
-#include <intrin.h>
-#define LOAD_ACQ(p) (_ReadWriteBarrier(), *(volatile int64_t *)(p))
-#define STORE_REL(p, v) do { _ReadWriteBarrier(); *(volatile int64_t *)(p) = (v); } while (0)
-#define LOAD_RLX(p) (*(volatile int64_t *)(p))
-#define STORE_RLX(p, v) (*(volatile int64_t *)(p) = (v))
-#define FETCH_ADD(p, v) _InterlockedExchangeAdd64((volatile __int64 *)(p), (v))
-#endif
+#include "_rt.h" /* atomics, the monotonic clock, PortAudio's time layout, block stamps */
 
 #define MAXCH 64
 #define DRAIN_MAX 1024
@@ -129,6 +109,8 @@ typedef struct vs_core {
     /* counters */
     int64_t next_seq, applied_seq, blocks, underflows, late, ring_full, schedule_full, callbacks;
     double load_last, load_peak, load_avg;
+    vs_stamp_t out_stamp; /* the last PortAudio block: first frame, its DAC time (input path alignment) */
+    int has_out_stamp;
     /* device output mapping (PortAudio callback) */
     int dev_channels;
     int identity;
@@ -137,18 +119,7 @@ typedef struct vs_core {
 } Core;
 
 /* ------------------------------------------------------------------ time */
-static double now_s(void) {
-#ifdef _WIN32
-    LARGE_INTEGER f, t;
-    QueryPerformanceFrequency(&f);
-    QueryPerformanceCounter(&t);
-    return (double)t.QuadPart / (double)f.QuadPart;
-#else
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-#endif
-}
+#define now_s vs_now_s
 
 /* ------------------------------------------------------------------ ramps */
 static inline double ramp_value(const ramps_t *r, int c) {
@@ -457,12 +428,19 @@ static void core_render(Core *c, float *out, int64_t frames, int64_t stride, con
     }
 }
 
+/* Stamp the block about to render (its first frame, PortAudio's times, the monotonic clock), so
+ * the input path can put its frames on the output's clock (Core.output_stamp). */
+static void stamp_output_block(Core *c, const void *time_info) {
+    vs_stamp_write(&c->out_stamp, c->frame, (const vs_pa_time_t *)time_info, now_s());
+    c->has_out_stamp = 1;
+}
+
 /* The PortAudio stream callback (PaStreamCallback), interleaved float32 output. */
 static int pa_callback(const void *input, void *output, unsigned long frames, const void *time_info,
                        unsigned long status, void *user) {
     Core *c = (Core *)user;
     (void)input;
-    (void)time_info;
+    stamp_output_block(c, time_info);
     if (status & PA_OUTPUT_UNDERFLOW) STORE_REL(&c->underflows, c->underflows + 1);
     float *out = (float *)output;
     if (!c->identity) memset(out, 0, sizeof(float) * (size_t)frames * (size_t)c->dev_channels);
@@ -781,6 +759,14 @@ static PyObject *Core_run_callback(Core *self, PyObject *args) {
     return PyLong_FromLong(rc);
 }
 
+/* (first frame, adc, current, dac, monotonic s) of the last PortAudio output block, or None. */
+static PyObject *Core_output_stamp(Core *self, PyObject *unused) {
+    int64_t frame;
+    double t[4];
+    if (!self->has_out_stamp || !vs_stamp_read(&self->out_stamp, &frame, t)) Py_RETURN_NONE;
+    return Py_BuildValue("(Ldddd)", (long long)frame, t[0], t[1], t[2], t[3]);
+}
+
 static PyObject *Core_addresses(Core *self, PyObject *unused) {
     return Py_BuildValue("(KK)", (unsigned long long)(uintptr_t)&pa_callback, (unsigned long long)(uintptr_t)self);
 }
@@ -842,6 +828,8 @@ static PyMethodDef Core_methods[] = {
     {"run_callback", (PyCFunction)Core_run_callback, METH_VARARGS,
      "run_callback(out float32 (frames, device_channels), status_flags) -> paContinue; for tests"},
     {"addresses", (PyCFunction)Core_addresses, METH_NOARGS, "(PaStreamCallback address, userdata address)"},
+    {"output_stamp", (PyCFunction)Core_output_stamp, METH_NOARGS,
+     "(first frame, adc, current, dac, monotonic) of the last PortAudio output block, or None"},
     {NULL}};
 
 static PyTypeObject CoreType = {
