@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import queue
 import socket
 import threading
 import time
@@ -10,9 +11,15 @@ import time
 import pytest
 
 from tests.control.osc.fakes import make_controller
+from tests.e2e.oscclient import free_udp_port
+from tests.e2e.test_osc_e2e import OscDump, oscsend, require_tools
 from vibsynth.cli import main
+from vibsynth.control.controller import Controller
 from vibsynth.control.osc.codec import encode_message
 from vibsynth.control.osc.server import OscServer
+from vibsynth.engine.bank import BankSpec, build_bank
+from vibsynth.engine.engine import Engine
+from vibsynth.formats.basis_file import default_basis
 
 
 @pytest.fixture
@@ -22,6 +29,35 @@ def server():
     srv.start()
     yield srv, ctl
     srv.stop()
+
+
+@pytest.fixture
+def engine_server():
+    """A 2-channel server in front of a real engine: its compiled fast path takes knob messages."""
+    engine = Engine(
+        build_bank(default_basis(), BankSpec(fs=8000.0, loop_seconds=1.0, levels=5)), channels=2, max_block=256
+    )
+    srv = OscServer(Controller(engine), port=0)
+    srv.start()
+    yield srv
+    srv.stop()
+
+
+def _start_monitor(srv: OscServer, count: int) -> tuple[threading.Thread, dict]:
+    """``vibsynth monitor --count N`` in a thread, returned once it has subscribed."""
+    result: dict = {}
+    thread = threading.Thread(
+        target=lambda: result.update(
+            code=main(
+                ["monitor", "--host", "127.0.0.1", "--port", str(srv.port), "--count", str(count), "--seconds", "20"]
+            )
+        )
+    )
+    thread.start()
+    deadline = time.monotonic() + 5
+    while not len(srv.monitor) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return thread, result
 
 
 def test_status_table_and_json(server, capsys):
@@ -57,16 +93,7 @@ def test_status_without_a_server_is_one_line(capsys):
 
 def test_monitor_prints_what_the_server_receives(server, capsys):
     srv, _ = server
-    result = {}
-    thread = threading.Thread(
-        target=lambda: result.update(
-            code=main(["monitor", "--host", "127.0.0.1", "--port", str(srv.port), "--count", "2", "--seconds", "10"])
-        )
-    )
-    thread.start()
-    deadline = time.monotonic() + 5
-    while not len(srv.monitor) and time.monotonic() < deadline:
-        time.sleep(0.01)
+    thread, result = _start_monitor(srv, 2)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.sendto(encode_message("/vibsynth/ch/1/balance", (0.5,), "f"), ("127.0.0.1", srv.port))
         sock.sendto(encode_message("/vibsynth/nothing", ()), ("127.0.0.1", srv.port))
@@ -80,3 +107,57 @@ def test_monitor_prints_what_the_server_receives(server, capsys):
     while len(srv.monitor) and time.monotonic() < deadline:  # it unsubscribed on the way out
         time.sleep(0.01)
     assert len(srv.monitor) == 0
+
+
+#: What oscsend sends (address, types, arguments): knob moves the fast path takes, then one
+#: message for the handler. The first, global, moves both channels of the server.
+SENT = [
+    ("/vibsynth/intensity", "f", "0.3"),
+    ("/vibsynth/ch/2/texture", "ff", "0.25", "-1.5"),
+    ("/vibsynth/balance", "d", "0.75"),
+    ("/vibsynth/ch/1/intensity", "i", "1"),
+    ("/vibsynth/ch/1/get", "s", "balance"),
+]
+
+
+def _as_received(text: str) -> tuple:
+    """``/a ff 0.25 -1.5`` -> ("/a", "ff", 0.25, -1.5): numbers by value (oscdump prints %f, we %g)."""
+    address, types, *args = text.split()
+    return (address, types, *(round(float(a), 5) if tag in "ifdh" else a for tag, a in zip(types, args, strict=True)))
+
+
+def test_monitor_prints_fast_path_messages_as_sent_like_oscdump(engine_server, capsys):
+    require_tools("oscsend", "oscdump")
+    dump_port = free_udp_port()
+    dump = OscDump(dump_port)
+    try:
+        deadline = time.monotonic() + 10
+        while True:  # until oscdump listens
+            oscsend(dump_port, "/ready")
+            try:
+                dump.wait_for("/ready", timeout=0.2)
+                break
+            except AssertionError:
+                assert time.monotonic() < deadline, "oscdump did not start"
+        thread, result = _start_monitor(engine_server, len(SENT))
+        for message in SENT:  # the same packets to the server and to oscdump
+            oscsend(engine_server.port, *message)
+            oscsend(dump_port, *message)
+        thread.join(timeout=20)
+        dumped = []
+        for _ in SENT:
+            try:
+                dumped.append(dump.lines.get(timeout=10))
+            except queue.Empty:
+                break
+    finally:
+        dump.close()
+    assert result == {"code": 0}
+    lines = capsys.readouterr().out.splitlines()
+    sources = [line.split()[1] for line in lines]
+    assert sources == ["osc-fast"] * 4 + ["osc"]  # one line per message, the global one too
+    shown = [line.split(maxsplit=2)[2] for line in lines]
+    assert all(text.endswith(")") and "  (udp 127.0.0.1:" in text for text in shown)
+    monitored = [_as_received(text.rsplit("  (", 1)[0]) for text in shown]
+    assert monitored == [_as_received(line) for line in dumped]
+    assert monitored[0][:2] == ("/vibsynth/intensity", "f") and engine_server.counters()["fast_path"] == 4

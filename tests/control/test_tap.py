@@ -74,3 +74,17 @@ def test_two_readers_each_see_everything_in_order_while_threads_publish():
     tap.detach()
     tap.detach()
     assert not tap.active
+
+
+def test_the_flag_byte_says_whether_anyone_reads_and_late_publishers_keep_their_arrival_time():
+    tap = InputTap(clock=lambda: 100.0)
+    assert tap.flag == bytearray(b"\x00")
+    first = tap.attach()
+    tap.attach()
+    tap.detach()
+    assert tap.flag[0] == 1  # one reader left
+    tap.publish("osc-fast", "/vibsynth/intensity f 0.3", at=99.5)
+    tap.publish("osc", '/vibsynth/get s "intensity"')
+    assert [(e.time, e.source) for e in tap.read(first)[0]] == [(99.5, "osc-fast"), (100.0, "osc")]
+    tap.detach()
+    assert tap.flag[0] == 0

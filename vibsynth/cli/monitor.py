@@ -17,8 +17,8 @@ ORDER = 8
 HELP = """\
 Subscribe to a running `vibsynth serve` (OSC /vibsynth/monitor) and print, one line each,
 what it receives and how it takes it:
-  osc       an OSC message that reached the handler, with its sender
-  osc-fast  a knob move taken by the compiled fast path (latest values, every 20 ms at most)
+  osc       an OSC message the handler took, as sent, with its sender (like oscdump)
+  osc-fast  one the compiled fast path took straight to the engine (shown within 20 ms)
   midi      a MIDI message, with its port
   error     an error the server answered (to whom, and why)
 Runs until Ctrl-C, --seconds or --count. The subscription is renewed every 10 s and ends

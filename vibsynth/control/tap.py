@@ -5,8 +5,9 @@ port, knob moves taken by the compiled OSC fast path) and every error they answe
 (``/vibsynth/monitor`` subscribers, ``vibsynth monitor``, the studio's status page) follow the
 stream with a cursor.
 
-Cost when nobody listens: one attribute read per message (:attr:`InputTap.active`); the text
-of an event is only formatted when someone reads. Errors are always kept (the last
+Cost when nobody listens: one attribute read per message (:attr:`InputTap.active`; the
+compiled OSC receive loop reads the one byte of :attr:`InputTap.flag` instead, without the
+GIL); the text of an event is only formatted when someone reads. Errors are always kept (the last
 :data:`ERRORS_KEPT`), so a status query can show them. Memory is bounded: a ring of
 ``capacity`` events; a reader that falls behind is told how many it missed.
 """
@@ -38,7 +39,7 @@ class InputEvent:
     time : float
         Wall-clock time (Unix seconds) of arrival.
     source : str
-        ``osc``, ``osc-fast`` (a knob move taken by the compiled fast path), ``midi`` or ``error``.
+        ``osc``, ``osc-fast`` (a message the compiled fast path took), ``midi`` or ``error``.
     text : str
         What arrived, as text (at most :data:`MAX_TEXT` characters).
     """
@@ -73,6 +74,9 @@ class InputTap:
         self._evicted = 0  # seq of the last event pushed out of the ring
         self._readers = 0
         self._lock = threading.Lock()
+        #: One byte, 1 while someone reads: a compiled publisher holds this buffer and reads it
+        #: without the GIL (see :mod:`vibsynth.control.osc.fast`).
+        self.flag = bytearray(1)
 
     @property
     def active(self) -> bool:
@@ -83,21 +87,27 @@ class InputTap:
         """Start reading: returns the cursor of the next event."""
         with self._lock:
             self._readers += 1
+            self.flag[0] = 1
             return self._seq + 1
 
     def detach(self) -> None:
         """Stop reading (one :meth:`attach` each)."""
         with self._lock:
             self._readers = max(0, self._readers - 1)
+            self.flag[0] = int(self._readers > 0)
 
-    def publish(self, source: str, text: str | Callable[[], str]) -> None:
-        """Add an event when someone reads; ``text`` may be a callable, called only then."""
+    def publish(self, source: str, text: str | Callable[[], str], at: float | None = None) -> None:
+        """Add an event when someone reads; ``text`` may be a callable, called only then.
+
+        ``at`` is the wall-clock time of arrival when the publisher learns of it later (now
+        otherwise).
+        """
         if not self._readers:
             return
         shown = _clip(text() if callable(text) else text)
         with self._lock:
             self._seq += 1
-            self._push(InputEvent(self._seq, self.clock(), source, shown))
+            self._push(InputEvent(self._seq, self.clock() if at is None else at, source, shown))
 
     def _push(self, event: InputEvent) -> None:
         if len(self._events) == self.capacity:

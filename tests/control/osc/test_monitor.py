@@ -91,38 +91,41 @@ def test_off_host_udp_and_too_many_subscribers_are_refused(rig):
     assert "too many monitor subscribers" in late.errors()[0][1]
 
 
-def test_fast_path_moves_reach_the_monitor_through_a_real_server():
+def test_fast_path_messages_reach_the_monitor_as_sent_through_a_real_server():
     from vibsynth.control.controller import Controller
     from vibsynth.engine.bank import BankSpec, build_bank
     from vibsynth.engine.engine import Engine
     from vibsynth.formats.basis_file import default_basis
 
     engine = Engine(
-        build_bank(default_basis(), BankSpec(fs=8000.0, loop_seconds=1.0, levels=5)), channels=1, max_block=256
+        build_bank(default_basis(), BankSpec(fs=8000.0, loop_seconds=1.0, levels=5)), channels=2, max_block=256
     )
     server = OscServer(Controller(engine), port=0)
     server.start()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.settimeout(0.2)
+    sock.bind(("127.0.0.1", 0))
+    sender = f"udp 127.0.0.1:{sock.getsockname()[1]}"
     try:
         target = ("127.0.0.1", server.port)
         sock.sendto(encode_message("/vibsynth/monitor", (1,)), target)
         sock.settimeout(5.0)
         assert decode_packet(sock.recv(65536)).address == "/vibsynth/done"  # subscribed
-        sock.settimeout(0.2)
-        # alone in its batch (not behind a slow-path packet), an exact knob address takes the C fast path
-        sock.sendto(encode_message("/vibsynth/ch/1/intensity", (0.5,), "f"), target)
-        seen, deadline = [], time.monotonic() + 5.0
-        while time.monotonic() < deadline and not any(src == "osc-fast" for src, _ in seen):
-            try:
-                packet = decode_packet(sock.recv(65536))
-            except TimeoutError:
-                engine.render(64)  # the fast path's moves are recorded as the engine takes them
-                continue
+        # exact knob addresses, not behind a slow-path packet in their batch: the C fast path
+        sock.sendto(encode_message("/vibsynth/intensity", (0.5,), "f"), target)  # moves both channels
+        sock.sendto(encode_message("/vibsynth/ch/2/texture", (0.25, -1), "fi"), target)
+        sock.sendto(encode_message("/vibsynth/ch/1/get", ("balance",), "s"), target)  # the handler's
+        seen, deadline = [], time.monotonic() + 10.0
+        while time.monotonic() < deadline and len(seen) < 3:
+            packet = decode_packet(sock.recv(65536))
             for msg, _ in iter_messages(packet) if not isinstance(packet, Message) else [(packet, None)]:
                 if msg.address == "/vibsynth/monitor.event":
                     seen.append((msg.args[1], msg.args[2]))
-        assert ("osc-fast", "/vibsynth/ch/1/intensity f 0.5  (compiled fast path)") in seen
+        assert seen == [
+            ("osc-fast", f"/vibsynth/intensity f 0.5  ({sender})"),
+            ("osc-fast", f"/vibsynth/ch/2/texture fi 0.25 -1  ({sender})"),
+            ("osc", f'/vibsynth/ch/1/get s "balance"  ({sender})'),
+        ]
+        assert server.counters()["fast_path"] == 2
     finally:
         sock.close()
         server.stop()

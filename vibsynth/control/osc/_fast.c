@@ -19,8 +19,14 @@
  * loop (allow list, batching) in front of the Python handler.
  *
  * The controller (queries, notify subscribers) learns of fast-path moves through
- * on_state(updates, last_seq) with the last value per (knob, channel): before each Python
- * batch and at most every STATE_PERIOD_S otherwise.
+ * on_state(updates, last_seq, seen) with the last value per (knob, channel): before each
+ * Python batch and at most every STATE_PERIOD_S otherwise.
+ *
+ * Monitors: while the byte of the `watch` buffer (the input tap's flag) is non-zero, each
+ * datagram the fast path takes is also copied, as received, with its sender and arrival time,
+ * into a log of MAX_SEEN entries handed to on_state as `seen` [(datagram, (host, port), unix
+ * time), ...] in arrival order (a full log is handed over at once: nothing is dropped). So a
+ * monitor shows what was sent (`/vibsynth/intensity f 0.3`), not the channels it moved.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -55,6 +61,8 @@ typedef int sock_t;
 #define MAXCH 64
 #define STATE_PERIOD_S 0.02
 #define POLL_MS 100
+#define MAX_SEEN 256
+#define SEEN_DATAGRAM 160 /* > the longest fast-path datagram: 128 (address) + 4 (",dd") + 16 */
 
 enum { M_INTENSITY = 1, M_BALANCE = 2, M_TEXTURE = 3 };
 
@@ -64,6 +72,13 @@ typedef struct {
     int method;
     int channel;  /* -1 = every channel */
 } entry_t;
+
+typedef struct {
+    double when;  /* wall clock (Unix seconds) of arrival */
+    int len;
+    uint8_t data[SEEN_DATAGRAM];
+    struct sockaddr_storage addr;
+} seen_t;
 
 typedef struct {
     int family;   /* 4 or 6 */
@@ -80,7 +95,11 @@ typedef struct {
     int channels;
     double bal_min, bal_max;
     PyObject *on_slow;      /* on_slow([(bytes, (host, port)), ...]) */
-    PyObject *on_state;     /* on_state([(knob, channel, value), ...], last_seq) */
+    PyObject *on_state;     /* on_state([(knob, channel, value), ...], last_seq, seen) */
+    Py_buffer watch_view;   /* the tap's flag (view.obj NULL: no monitor support) */
+    const volatile uint8_t *watch;
+    seen_t *seen;           /* fast-path datagrams received while watched, not yet handed over */
+    int n_seen;
     entry_t table[TABLE_SIZE];
     net_t nets[MAX_NETS];
     int n_nets;             /* -1 = allow everyone */
@@ -109,6 +128,18 @@ static double now_s(void) {
 #else
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+}
+
+static double wall_s(void) {
+#ifdef _WIN32
+    FILETIME ft;
+    GetSystemTimePreciseAsFileTime(&ft);
+    return (double)(((uint64_t)ft.dwHighDateTime << 32) | ft.dwLowDateTime) * 1e-7 - 11644473600.0;
+#else
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 #endif
 }
@@ -257,11 +288,36 @@ static int fast_handle(Receiver *r, const uint8_t *d, int n) {
     }
 }
 
+/* Keep a copy of a datagram the fast path took, for monitors (the caller hands a full log over). */
+static void log_seen(Receiver *r, const uint8_t *d, int n, const struct sockaddr_storage *addr) {
+    if (n > SEEN_DATAGRAM || r->n_seen >= MAX_SEEN) return; /* cannot happen: fast_handle bounds both */
+    seen_t *s = &r->seen[r->n_seen++];
+    s->when = wall_s();
+    s->len = n;
+    memcpy(s->data, d, (size_t)n);
+    s->addr = *addr;
+}
+
 /* ------------------------------------------------------------------ calls into Python (GIL held) */
+static PyObject *peer_tuple(const struct sockaddr_storage *addr);
+
+static PyObject *seen_list(Receiver *r) {
+    PyObject *list = PyList_New(r->n_seen);
+    for (int k = 0; list && k < r->n_seen; k++) {
+        const seen_t *s = &r->seen[k];
+        PyObject *t = Py_BuildValue("(y#Nd)", (const char *)s->data, (Py_ssize_t)s->len, peer_tuple(&s->addr), s->when);
+        if (!t) Py_CLEAR(list);
+        else PyList_SET_ITEM(list, k, t);
+    }
+    r->n_seen = 0;
+    return list;
+}
+
 static void flush_state(Receiver *r) {
-    if (!r->any_dirty) return;
+    if (!r->any_dirty && !r->n_seen) return;
+    PyObject *seen = seen_list(r);
     PyObject *list = PyList_New(0);
-    if (!list) goto fail;
+    if (!list || !seen) goto fail;
     for (int knob = 0; knob < 2; knob++) {
         for (int c = 0; c < r->channels; c++) {
             if (!r->dirty[knob][c]) continue;
@@ -275,15 +331,18 @@ static void flush_state(Receiver *r) {
         }
     }
     r->any_dirty = 0;
-    PyObject *res = PyObject_CallFunction(r->on_state, "OL", list, (long long)r->last_seq);
+    PyObject *res = PyObject_CallFunction(r->on_state, "OLO", list, (long long)r->last_seq, seen);
     Py_DECREF(list);
+    Py_DECREF(seen);
     if (!res) goto fail_noclean;
     Py_DECREF(res);
     r->last_flush = now_s();
     return;
 fail:
     Py_XDECREF(list);
+    Py_XDECREF(seen);
 fail_noclean:
+    r->last_flush = now_s(); /* retry in STATE_PERIOD_S, not at once */
     r->handler_errors++;
     PyErr_WriteUnraisable(r->on_state);
 }
@@ -346,7 +405,12 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
     PyThreadState *ts = PyEval_SaveThread();
     while (!r->stop) {
         struct pollfd pfd = {r->fd, POLLIN, 0};
-        int ready = poll(&pfd, 1, POLL_MS);
+        int wait_ms = POLL_MS;
+        if (r->any_dirty || r->n_seen) { /* wake up in time to hand them over within STATE_PERIOD_S */
+            double left = STATE_PERIOD_S - (now_s() - r->last_flush);
+            wait_ms = left <= 0.0 ? 0 : (int)(left * 1000.0) + 1;
+        }
+        int ready = poll(&pfd, 1, wait_ms);
         if (r->stop) break;
         int batch = 0, to_python = 0;
         if (ready > 0) {
@@ -374,6 +438,14 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
                 }
                 if (!to_python && fast_handle(r, r->scratch, (int)n)) {
                     r->fast++;
+                    if (r->watch && *r->watch) {
+                        log_seen(r, r->scratch, (int)n, &addr);
+                        if (r->n_seen == MAX_SEEN) {
+                            PyEval_RestoreThread(ts);
+                            flush_state(r);
+                            ts = PyEval_SaveThread();
+                        }
+                    }
                     continue;
                 }
                 to_python = 1; /* keep arrival order: the rest of this batch goes to Python too */
@@ -390,7 +462,7 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
                 r->arena_used += (size_t)n;
             }
         }
-        if (r->n_slow || (r->any_dirty && now_s() - r->last_flush >= STATE_PERIOD_S)) {
+        if (r->n_slow || ((r->any_dirty || r->n_seen) && now_s() - r->last_flush >= STATE_PERIOD_S)) {
             PyEval_RestoreThread(ts);
             if (r->n_slow)
                 dispatch_slow(r);
@@ -412,12 +484,25 @@ static PyObject *Receiver_stop(Receiver *r, PyObject *unused) {
 
 /* ------------------------------------------------------------------ construction */
 static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
-    static char *names[] = {"fd", "core", "table", "balance_min", "balance_max", "on_slow", "on_state", "allow", NULL};
+    static char *names[] = {"fd",      "core",     "table", "balance_min", "balance_max",
+                            "on_slow", "on_state", "allow", "watch",       NULL};
     long long fd;
-    PyObject *core, *table, *on_slow, *on_state, *allow;
-    if (!PyArg_ParseTupleAndKeywords(args, kw, "LOOddOOO", names, &fd, &core, &table, &r->bal_min, &r->bal_max,
-                                     &on_slow, &on_state, &allow))
+    PyObject *core, *table, *on_slow, *on_state, *allow, *watch = Py_None;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "LOOddOOO|O", names, &fd, &core, &table, &r->bal_min, &r->bal_max,
+                                     &on_slow, &on_state, &allow, &watch))
         return -1;
+    if (r->watch_view.obj) PyBuffer_Release(&r->watch_view);
+    r->watch = NULL;
+    r->n_seen = 0;
+    if (watch != Py_None) { /* watch: a buffer whose first byte says whether to log for monitors */
+        if (PyObject_GetBuffer(watch, &r->watch_view, PyBUF_SIMPLE) < 0) return -1;
+        if (r->watch_view.len < 1) {
+            PyBuffer_Release(&r->watch_view);
+            PyErr_SetString(PyExc_ValueError, "watch: an empty buffer");
+            return -1;
+        }
+        r->watch = (const volatile uint8_t *)r->watch_view.buf;
+    }
     r->fd = (sock_t)fd;
     r->api = NULL;
     r->core_ptr = NULL;
@@ -493,7 +578,8 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
     }
     if (!r->scratch) r->scratch = PyMem_RawMalloc(MAX_DATAGRAM);
     if (!r->arena) r->arena = PyMem_RawMalloc(SLOW_ARENA);
-    if (!r->scratch || !r->arena) {
+    if (!r->seen) r->seen = PyMem_RawMalloc(MAX_SEEN * sizeof(seen_t));
+    if (!r->scratch || !r->arena || !r->seen) {
         PyErr_NoMemory();
         return -1;
     }
@@ -504,8 +590,10 @@ static void Receiver_dealloc(Receiver *r) {
     Py_XDECREF(r->core);
     Py_XDECREF(r->on_slow);
     Py_XDECREF(r->on_state);
+    if (r->watch_view.obj) PyBuffer_Release(&r->watch_view);
     PyMem_RawFree(r->scratch);
     PyMem_RawFree(r->arena);
+    PyMem_RawFree(r->seen);
     Py_TYPE(r)->tp_free((PyObject *)r);
 }
 
