@@ -7,6 +7,11 @@ over OSC; OSC moves must show on the page; presets are saved, edited and deleted
 form; a texture recording made from ../shared is uploaded; requests without the token and
 from a foreign origin are refused. Every wait is an explicit wait on a condition.
 
+The keyboard: a focused slider moves by 1 % of its range per arrow key and 10 % with Page
+Up/Down or Shift+arrow, whatever its drag resolution (``step``, 0.001 of the intensity, which a
+drag keeps); the XY pad the same on its two axes. Save as on a fresh page saves the knobs that
+play, as ``vibsynth preset show`` reads them back.
+
 The run writes a screenshot (``studio.png`` in the test's folder, and to
 ``$VIBSYNTH_STUDIO_SCREENSHOT`` when set: docs/images/studio.png comes from there).
 
@@ -19,6 +24,8 @@ import http.server
 import json
 import os
 import shutil
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -28,6 +35,8 @@ import pytest
 import vibsynth
 from tests.control.studio.helpers import texture_recording
 from tests.e2e.studioutil import (
+    ROOT,
+    Served,
     by_testid,
     chromium,
     console_errors,
@@ -143,9 +152,9 @@ def test_sliders_pad_and_buttons_drive_the_engine(page, served):
     wait_for(lambda: close(served.get("balance"), 3.5), what="balance 3.5 (End)")
     balance.send_keys(Keys.HOME)
     wait_for(lambda: close(served.get("balance"), -3.5), what="balance -3.5 (Home)")
-    balance.send_keys(Keys.ARROW_RIGHT, Keys.ARROW_RIGHT)
-    wait_for(lambda: close(served.get("balance"), -3.498), what="two steps right")
-    assert by_testid(page, "balance-value").text == "-3.498"
+    balance.send_keys(Keys.ARROW_RIGHT, Keys.ARROW_RIGHT)  # 1 % of the range each (test_studio_keys_e2e.py)
+    wait_for(lambda: close(served.get("balance"), -3.36), what="two steps right")
+    assert by_testid(page, "balance-value").text == "-3.360"
     # channel 2 is its own
     assert close(served.get("intensity", channel=2), 0.0)
     # the XY pad: the top-right corner region is loud and bright
@@ -172,6 +181,77 @@ def test_sliders_pad_and_buttons_drive_the_engine(page, served):
     by_testid(page, "panic").click()
     wait_for(lambda: close(served.get("intensity"), 0.0) and close(served.get("intensity", 2), 0.0), what="panic")
     wait_for(lambda: by_testid(page, "intensity-value").text == "0.000", what="the page after panic")
+
+
+def press(page, served, testid: str, keys: str, expected: float, knob: str | None = None) -> None:
+    """Send keys to a focused control; the slider, its number and the engine's knob must show ``expected``."""
+    element = by_testid(page, testid)
+    element.send_keys(keys)
+    knob = knob or testid
+    wait_for(lambda: close(by_testid(page, knob).get_attribute("value"), expected, 1e-9), what=f"{knob} at {expected}")
+    shown = f"{expected:.3f}" if knob == "intensity" else f"{'+' if expected >= 0 else ''}{expected:.3f}"
+    assert by_testid(page, f"{knob}-value").text == shown
+    wait_for(lambda: close(served.get(knob), expected), what=f"the engine's {knob} at {expected}")
+
+
+def test_the_sliders_move_1_percent_per_arrow_and_10_percent_with_page_or_shift(page, served):
+    from selenium.webdriver.common.keys import Keys
+
+    intensity = by_testid(page, "intensity")
+    assert intensity.get_attribute("step") == "0.001"  # the drag resolution is kept
+    press(page, served, "intensity", Keys.HOME, 0.0)
+    press(page, served, "intensity", Keys.ARROW_RIGHT, 0.01)
+    press(page, served, "intensity", Keys.ARROW_UP * 2, 0.03)
+    press(page, served, "intensity", Keys.PAGE_UP, 0.13)
+    press(page, served, "intensity", Keys.SHIFT + Keys.ARROW_RIGHT + Keys.NULL, 0.23)
+    press(page, served, "intensity", Keys.SHIFT + Keys.ARROW_UP + Keys.NULL, 0.33)
+    press(page, served, "intensity", Keys.ARROW_LEFT, 0.32)
+    press(page, served, "intensity", Keys.PAGE_DOWN, 0.22)
+    press(page, served, "intensity", Keys.SHIFT + Keys.ARROW_DOWN + Keys.NULL, 0.12)
+    press(page, served, "intensity", Keys.PAGE_DOWN * 3, 0.0)  # kept at the end
+    press(page, served, "intensity", Keys.END, 1.0)
+    press(page, served, "intensity", Keys.ARROW_RIGHT, 1.0)
+    # balance (the live range -3.5..+3.5): end to end in 100 arrow presses, or 10 page presses
+    press(page, served, "balance", Keys.HOME, -3.5)
+    press(page, served, "balance", Keys.ARROW_RIGHT, -3.43)
+    press(page, served, "balance", Keys.ARROW_RIGHT * 49, 0.0)
+    press(page, served, "balance", Keys.ARROW_RIGHT * 50, 3.5)
+    press(page, served, "balance", Keys.PAGE_DOWN * 10, -3.5)
+    press(page, served, "balance", Keys.SHIFT + Keys.ARROW_RIGHT * 3 + Keys.NULL, -1.4)
+    press(page, served, "balance", Keys.ARROW_LEFT, -1.47)
+    # the other channel is not touched
+    assert close(served.get("balance", channel=2), 0.0)
+
+
+def test_a_drag_keeps_its_fine_resolution(page, served):
+    """A drag of one pixel moves the slider less than one arrow step (the keys do not coarsen drags)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    intensity = by_testid(page, "intensity")
+    width = intensity.size["width"]
+    assert width >= 150, width  # 1 px < 1 % of the range
+    x = -int(width * 0.2)  # from the slider's centre
+    ActionChains(page).move_to_element_with_offset(intensity, x, 0).click().perform()
+    before = float(intensity.get_attribute("value"))
+    ActionChains(page).move_to_element_with_offset(intensity, x, 0).click_and_hold().move_to_element_with_offset(
+        intensity, x + 1, 0
+    ).release().perform()
+    after = float(intensity.get_attribute("value"))
+    assert 0 < after - before < 0.01, (before, after)
+    wait_for(lambda: close(served.get("intensity"), after), what="the dragged intensity")
+
+
+def test_the_pad_takes_the_same_steps(page, served):
+    from selenium.webdriver.common.keys import Keys
+
+    press(page, served, "intensity", Keys.HOME, 0.0)
+    press(page, served, "balance", Keys.HOME, -3.5)
+    press(page, served, "xy-pad", Keys.ARROW_RIGHT, -3.43, knob="balance")
+    press(page, served, "xy-pad", Keys.SHIFT + Keys.ARROW_RIGHT + Keys.NULL, -2.73, knob="balance")
+    press(page, served, "xy-pad", Keys.ARROW_UP, 0.01, knob="intensity")
+    press(page, served, "xy-pad", Keys.PAGE_UP, 0.11, knob="intensity")
+    press(page, served, "xy-pad", Keys.SHIFT + Keys.ARROW_DOWN + Keys.NULL, 0.01, knob="intensity")
+    press(page, served, "xy-pad", Keys.ARROW_LEFT, -2.8, knob="balance")
 
 
 def test_osc_moves_show_on_the_page_with_their_spectrum(page, served, basis):
@@ -228,6 +308,81 @@ def click_preset(page, name: str) -> None:
 
     selector = f'[data-testid="preset-item"][data-name="{name}"]'
     wait_for(lambda: page.find_element(By.CSS_SELECTOR, selector).click() or True, what=f"clicking {name}")
+
+
+def preset_show(served: Served, name: str) -> dict:
+    """``vibsynth preset show NAME --json`` with the service's config: what the command line loads."""
+    folder = served.log.parent
+    env = dict(
+        os.environ,
+        PYTHONPATH=str(ROOT),
+        XDG_CONFIG_HOME=str(folder / "xdg-config"),
+        XDG_DATA_HOME=str(folder / "xdg-data"),
+    )
+    command = [
+        sys.executable,
+        "-m",
+        "vibsynth",
+        "preset",
+        "show",
+        name,
+        "--json",
+        "--config",
+        str(folder / "vibsynth.yaml"),
+    ]
+    done = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def test_save_as_on_a_fresh_page_saves_the_sound_that_plays(page, served):
+    """Open the studio, move the knobs, type a name, Save: the preset is what was heard (issue 26)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    intensity = by_testid(page, "intensity")
+    balance = by_testid(page, "balance")
+    ActionChains(page).move_to_element_with_offset(intensity, int(intensity.size["width"] * 0.15), 0).click().perform()
+    ActionChains(page).move_to_element_with_offset(balance, -int(balance.size["width"] * 0.3), 0).click().perform()
+    i, b = float(intensity.get_attribute("value")), float(balance.get_attribute("value"))
+    assert 0.5 < i < 0.8 and -3.0 < b < -1.0
+    wait_for(lambda: close(served.get("intensity"), i) and close(served.get("balance"), b), what="the knobs moved")
+    # the form shows the knobs (it follows them until a field is typed in or a preset picked)
+    field_i = page.find_element(By.ID, "preset-field-intensity")
+    field_b = page.find_element(By.ID, "preset-field-balance")
+    wait_for(
+        lambda: (float(field_i.get_attribute("value")), float(field_b.get_attribute("value"))) == (i, b),
+        what="the form showing the knobs",
+    )
+    assert "follow the knobs of channel 1" in by_testid(page, "preset-follow").text
+    name = by_testid(page, "preset-save-name")
+    name.send_keys("e2e-heard")
+    by_testid(page, "preset-save").click()
+    wait_for(lambda: "saved e2e-heard" in page.find_element(By.ID, "preset-note").text, what="the saved note")
+    assert by_testid(page, "preset-error").text == ""
+    shown = preset_show(served, "e2e-heard")
+    assert (shown["intensity"], shown["balance"]) == (i, b), shown
+    assert close(served.get("intensity"), shown["intensity"]) and close(served.get("balance"), shown["balance"])
+    assert shown["provenance"]["from_knobs"] == {"channel": 1, "keys": ["intensity", "balance"]}
+    # the form keeps following: a new move, Save again, and the preset is the new sound
+    wait_for(lambda: "e2e-heard" in preset_names(page), what="the new preset in the list")
+    balance.send_keys(Keys.END)
+    wait_for(lambda: close(served.get("balance"), 3.5), what="balance 3.5")
+    wait_for(lambda: float(field_b.get_attribute("value")) == 3.5, what="the form following the move")
+    by_testid(page, "preset-save").click()
+    wait_for(lambda: preset_show(served, "e2e-heard")["balance"] == 3.5, what="the preset replaced by the new sound")
+    assert preset_show(served, "e2e-heard")["intensity"] == i
+    # a value typed in the form wins over the knobs; the other field still follows them
+    field_i.clear()
+    field_i.send_keys("0.25")
+    name.clear()
+    name.send_keys("e2e-typed")
+    by_testid(page, "preset-save").click()
+    wait_for(lambda: (served.user_dir / "e2e-typed.yaml").exists(), what="the second preset")
+    typed = preset_show(served, "e2e-typed")
+    assert (typed["intensity"], typed["balance"]) == (0.25, 3.5)
+    assert typed["provenance"]["from_knobs"] == {"channel": 1, "keys": ["balance"]}
 
 
 def test_filter_audition_save_edit_and_delete_presets(page, served):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import aiohttp
+import numpy as np
 import pytest
 
 from tests.control.studio.helpers import connect, get_json, http, receive_until, run
@@ -86,6 +87,40 @@ def test_wrong_fields_are_named_and_nothing_is_written(studio, user_dir, form, k
     assert key in problems and says in problems[key], problems
     assert says in result["message"]
     assert not (user_dir / "bad-one.yaml").exists()
+
+
+def test_save_as_with_a_channel_takes_what_it_plays_for_the_fields_left_out(studio, controller, user_dir):
+    """The page of a fresh studio sends only a name and its channel: the preset is the sound that plays."""
+    rng = np.random.default_rng(26)
+    intensity, balance = (round(float(v), 6) for v in (rng.uniform(0.1, 0.9), rng.uniform(-3.0, 3.0)))
+    controller.set_texture(intensity, balance, channels=[1])  # channel 2 (1-based)
+    controller.set_texture(0.05, -0.5, channels=[0])
+    status, result = post(studio, "/api/presets", {"name": "heard", "channel": 2, "like": None, "overwrite": False})
+    assert status == 200, result
+    saved = load_preset(user_dir / "heard.yaml")
+    assert (saved.intensity, saved.balance) == (intensity, balance)
+    assert saved.provenance["from_knobs"] == {"channel": 2, "keys": ["intensity", "balance"]}
+    # a field the form gives wins; only the one left out (or empty) comes from the knobs
+    status, result = post(studio, "/api/presets", {"name": "half", "channel": 1, "intensity": 0.75, "balance": ""})
+    assert status == 200, result
+    saved = load_preset(user_dir / "half.yaml")
+    assert (saved.intensity, saved.balance) == (0.75, -0.5)
+    assert saved.provenance["from_knobs"] == {"channel": 1, "keys": ["balance"]}
+    # editing it with both fields typed: nothing comes from the knobs, nor is said to
+    form = {"name": "half", "channel": 1, "intensity": 0.2, "balance": 1.0, "like": "half", "overwrite": True}
+    assert post(studio, "/api/presets", form)[0] == 200
+    saved = load_preset(user_dir / "half.yaml")
+    assert (saved.intensity, saved.balance) == (0.2, 1.0) and "from_knobs" not in saved.provenance
+
+
+@pytest.mark.parametrize("channel", [0, 3, -1, "1", 1.0, True, [1], {"c": 1}, pytest.param("x" * 5000, id="long")])
+def test_a_channel_that_is_not_one_of_the_engines_is_refused(studio, controller, user_dir, channel):
+    status, result = post(studio, "/api/presets", {"name": "nowhere", "channel": channel})
+    assert status == 400, result
+    assert result["problems"] == [{"key": "channel", "message": result["problems"][0]["message"]}]
+    assert "channel must be an integer 1..2" in result["message"] and len(result["message"]) <= 200
+    assert not (user_dir / "nowhere.yaml").exists()
+    assert controller.error_counts["studio"] == 1
 
 
 @pytest.mark.parametrize("name", ["../x", "a/b", "..", ".hidden", "", "x" * 65, "semi;colon", 7, None])

@@ -8,6 +8,11 @@ only into the user preset folder, atomically, under a plain file name
 Shipped presets are read-only. Changes of the library (the hot-reload watcher, the command
 line, another page) reach open pages within :data:`POLL_S`.
 
+A request naming a ``channel`` saves the sound that channel plays where the form is silent: each
+of :data:`KNOB_KEYS` it leaves out (or empty) is taken from the channel's knobs as they are when
+the preset is saved (the page leaves them out until the designer types in them or picks a
+preset), and the provenance records it (``from_knobs``). Without ``channel`` both are required.
+
 Routes: ``GET /api/presets`` (list, errors, form schema), ``POST /api/presets`` (save),
 ``DELETE /api/presets/{name}``.
 """
@@ -28,12 +33,15 @@ from vibsynth.settings.models_preset import NAME_PATTERN, NAME_RULE, PRESET_VERS
 from vibsynth.settings.presets import Preset, preset_from_data
 from vibsynth.settings.validation import InvalidPresetError, model_spec
 
-__all__ = ["FORM_KEYS", "POLL_S", "PresetsPanel", "form_schema", "preset_json"]
+__all__ = ["FORM_KEYS", "KNOB_KEYS", "POLL_S", "PresetsPanel", "form_schema", "preset_json"]
 
 #: The preset fields the form edits (``name`` is the save-as field; provenance is recorded, not typed).
 FORM_KEYS = ("description", "intensity", "balance", "glide_ms", "program", "tags")
-#: Request keys besides the fields: replace an existing user preset; the preset the form started from.
-REQUEST_KEYS = ("name", "overwrite", "like")
+#: The fields a request naming a ``channel`` may leave to that channel's knobs (what it plays).
+KNOB_KEYS = ("intensity", "balance")
+#: Request keys besides the fields: replace an existing user preset; the preset the form started
+#: from; the channel (1-based) whose knobs fill the :data:`KNOB_KEYS` the form leaves out.
+REQUEST_KEYS = ("name", "overwrite", "like", "channel")
 #: How often open pages are checked against the library (in memory: no file is read).
 POLL_S = 0.25
 
@@ -206,6 +214,8 @@ class PresetsPanel:
         fields = {
             k: v for k, v in data.items() if k not in REQUEST_KEYS and k != "provenance" and v is not None and v != ""
         }
+        knobs, from_knobs = self._knobs_for(fields, data.get("channel"))
+        fields.update(knobs)
         try:
             preset = preset_from_data({"version": PRESET_VERSION, "name": name, **fields}, "studio form", name=name)
         except InvalidPresetError as exc:
@@ -218,9 +228,39 @@ class PresetsPanel:
             provenance = dict(library.get(like).provenance)
             if like != name:
                 provenance["edited_from"] = like
+        provenance.pop("from_knobs", None)  # the preset it started from may have taken its own
+        if from_knobs:
+            provenance["from_knobs"] = from_knobs
         provenance["created_by"] = f"vibsynth {__version__} (studio)"
         preset = replace(preset, provenance=provenance)
         return self.write(preset, overwrite=overwrite)
+
+    def _knobs_for(self, fields: dict[str, Any], channel: Any) -> tuple[dict[str, float], dict[str, Any]]:
+        """The :data:`KNOB_KEYS` missing from ``fields``, read from a channel's knobs (what it plays).
+
+        Returns
+        -------
+        values : dict
+            key -> the channel's value; empty when nothing is missing or no channel is named.
+        provenance : dict
+            ``{"channel": N, "keys": [...]}`` when values were taken, else empty.
+
+        Raises
+        ------
+        RequestError
+            400 when ``channel`` is not one of the engine's channels (1-based).
+        """
+        if channel is None:
+            return {}, {}
+        count = self.server.controller.channels
+        if isinstance(channel, bool) or not isinstance(channel, int) or not 1 <= channel <= count:
+            message = f"channel must be an integer 1..{count} (whose knobs fill intensity and balance)"
+            raise RequestError(400, f"{message}, got {channel!r}"[:200], [{"key": "channel", "message": message}])
+        missing = [k for k in KNOB_KEYS if k not in fields]
+        if not missing:
+            return {}, {}
+        state = self.server.controller.state()[channel - 1]
+        return {k: float(getattr(state, k)) for k in missing}, {"channel": channel, "keys": missing}
 
     def write(self, preset: Preset, *, overwrite: bool) -> dict[str, Any]:
         """Write a validated preset into the user folder (refusing to replace one unless told)."""

@@ -1,7 +1,10 @@
 // Knobs panel: channel, intensity and balance sliders, XY pad, glide, mute, panic.
 // Local moves are sent at once (one WebSocket message per input event); values pushed by
 // the service (OSC, MIDI, presets, other pages) are shown unless the user is moving that
-// control right now, and the control catches up when the user lets go.
+// control right now, and the control catches up when the user lets go. The keys move the sliders
+// and the pad by 1 % of the range (10 % with Shift or Page Up/Down): keysteps.js.
+
+import { keySteps, onStepKeys, stepValue } from "./keysteps.js";
 
 const HOLD_MS = 300; // a control the user just touched ignores pushes this long
 
@@ -40,6 +43,8 @@ export function mountKnobs(studio) {
 
   const current = () => channels[Number(select.value) - 1];
   studio.currentKnobs = () => current(); // the channel shown: {channel, intensity, balance, ...}
+  // a local event for the other panels (the preset form follows the knobs): never sent to the service
+  const announce = () => { const s = current(); if (s) studio.dispatch({ type: "knobs-shown", ...s }); };
   const held = (name) => dragging === name || dragging === "xy" && name !== "glide" || performance.now() < heldUntil[name];
 
   function hold(...names) {
@@ -80,6 +85,7 @@ export function mountKnobs(studio) {
     const driver = s.driver && s.driver !== "knobs" ? `driven by ${s.driver}` : "driven by these knobs";
     plays.textContent = `plays ${preset} · ${driver}`;
     plays.dataset.driver = s.driver || "knobs";
+    announce();
   }
 
   function showError(text) {
@@ -93,6 +99,7 @@ export function mountKnobs(studio) {
     if (!s) return;
     s[name] = value;
     studio.send({ type: "knob", channel: s.channel, name, value });
+    announce();
   }
 
   function sendTexture(b, i) {
@@ -101,6 +108,7 @@ export function mountKnobs(studio) {
     s.balance = b;
     s.intensity = i;
     studio.send({ type: "texture", channel: s.channel, intensity: i, balance: b });
+    announce();
   }
 
   // ------------------------------------------------------------------ pushes
@@ -148,6 +156,7 @@ export function mountKnobs(studio) {
     [intensity, intensityText, "intensity", formatIntensity],
     [balance, balanceText, "balance", formatBalance],
   ]) {
+    keySteps(input);
     input.addEventListener("pointerdown", () => { dragging = name; });
     input.addEventListener("input", () => {
       const value = Number(input.value);
@@ -190,18 +199,15 @@ export function mountKnobs(studio) {
   pad.addEventListener("pointermove", (event) => {
     if (dragging === "xy") padMove(...fromPointer(event));
   });
-  pad.addEventListener("keydown", (event) => {
-    const big = event.shiftKey ? 10 : 1;
-    const span = limits.balance_max - limits.balance_min;
-    let b = Number(balance.value);
-    let i = Number(intensity.value);
-    if (event.key === "ArrowLeft") b -= 0.01 * span * big;
-    else if (event.key === "ArrowRight") b += 0.01 * span * big;
-    else if (event.key === "ArrowUp") i += 0.01 * big;
-    else if (event.key === "ArrowDown") i -= 0.01 * big;
-    else return;
-    event.preventDefault();
-    padMove(b, i);
+  onStepKeys(pad, (fraction, event) => {
+    // left/right move the balance (x), up/down and Page Up/Down the intensity (y)
+    const b = Number(balance.value);
+    const i = Number(intensity.value);
+    if (event.key === "ArrowLeft" || event.key === "ArrowRight") {
+      padMove(stepValue(b, fraction, limits.balance_min, limits.balance_max), i);
+    } else {
+      padMove(b, stepValue(i, fraction, 0, 1));
+    }
   });
 
   glide.addEventListener("change", () => {

@@ -22,7 +22,10 @@ class Studio {
     this.connection = document.getElementById("connection");
   }
 
-  /** Call fn(message) for every pushed message of this type ("hello", "knob", "status", ...). */
+  /**
+   * Call fn(message) for every pushed message of this type ("hello", "knob", "status", ...), and
+   * for the panels' local events ("knobs-shown": the knobs of the channel shown, after any change).
+   */
   on(type, fn) {
     if (!this.handlers.has(type)) this.handlers.set(type, []);
     this.handlers.get(type).push(fn);

@@ -1,9 +1,13 @@
 // Presets panel: the library (filter by name or tag, click to audition), a form with every
 // field and its range, save as a user preset (errors beside the fields), delete user presets.
 // The list follows the library live (hot reload, the command line, other pages).
+// Until a preset is picked, intensity and balance follow the knobs of the channel shown, so that
+// Save as saves the sound that plays; they are then left out of the request and the service fills
+// them from that channel's knobs as they are when it saves (docs/studio.md, "Presets").
 
 const $ = (id) => document.getElementById(id);
 const CONFIRM_MS = 5000;
+const FOLLOWED = ["intensity", "balance"]; // the fields that can follow the channel's knobs
 
 function el(tag, attrs = {}, text = "") {
   const node = document.createElement(tag);
@@ -32,6 +36,8 @@ export function mountPresets(studio) {
   let dirty = false;          // the form was edited since it was loaded
   let replaceName = null;     // the name the user was asked to confirm replacing
   let deleteArmed = null;     // [name, timer] after the first click on delete
+  const following = new Set(FOLLOWED); // fields showing the channel's knobs (none typed in, no preset picked)
+  let followNote = null;
   const inputs = {};
 
   // ------------------------------------------------------------------ the form
@@ -58,20 +64,41 @@ export function mountPresets(studio) {
       const problem = el("p", { class: "field-error", id: `${id}-error`, role: "alert" });
       input.setAttribute("aria-describedby", `${id}-help ${id}-error`);
       if (field.required) input.required = true;
-      input.addEventListener("input", () => { dirty = true; clearProblem(field.key); });
+      input.addEventListener("input", () => {
+        dirty = true;
+        clearProblem(field.key);
+        if (following.delete(field.key)) follow();
+      });
       inputs[field.key] = { input, problem, field };
       fieldsBox.append(label, input, help, problem);
     }
     const take = el("button", { type: "button", id: "preset-take-knobs" }, "Take the knobs");
-    take.title = "Fill intensity and balance from the channel shown in the Knobs panel";
+    take.title = "Intensity and balance from the channel shown in the Knobs panel, following it " +
+      "until you type in them or pick a preset";
     take.addEventListener("click", () => {
-      const knobs = studio.currentKnobs && studio.currentKnobs();
-      if (!knobs) return;
-      inputs.intensity.input.value = String(Number(knobs.intensity.toFixed(4)));
-      inputs.balance.input.value = String(Number(knobs.balance.toFixed(4)));
+      for (const key of FOLLOWED) {
+        following.add(key);
+        clearProblem(key);
+      }
       dirty = true;
+      follow();
     });
-    fieldsBox.append(el("span"), take);
+    followNote = el("p", { class: "note follow", id: "preset-follow", "data-testid": "preset-follow" });
+    fieldsBox.append(el("span"), take, followNote);
+    follow();
+  }
+
+  /** Show the channel's knobs in the fields that follow them (knobs: the Knobs panel's channel). */
+  function follow(knobs = studio.currentKnobs && studio.currentKnobs()) {
+    if (!followNote) return;
+    for (const key of FOLLOWED) {
+      const on = following.has(key);
+      inputs[key].input.classList.toggle("following", on);
+      if (on && knobs) inputs[key].input.value = String(Number(Number(knobs[key]).toFixed(4)));
+    }
+    followNote.textContent = following.size && knobs
+      ? `${[...following].join(" and ")} follow the knobs of channel ${knobs.channel}: Save saves what plays`
+      : "";
   }
 
   function clearProblem(key) {
@@ -94,6 +121,8 @@ export function mountPresets(studio) {
     }
     saveName.value = preset.name;
     selected = preset.name;
+    following.clear();
+    follow();
     dirty = false;
     replaceName = null;
     clearProblems();
@@ -104,7 +133,7 @@ export function mountPresets(studio) {
     const body = {};
     for (const [key, { input, field }] of Object.entries(inputs)) {
       const text = input.value.trim();
-      if (text === "") continue;
+      if (text === "" || following.has(key)) continue; // the service fills these from the channel's knobs
       if (key === "tags") body.tags = text.split(",").map((t) => t.trim()).filter(Boolean);
       else if (key === "description") body.description = input.value;
       else if (field.type === "integer") body[key] = Number.isInteger(Number(text)) ? Number(text) : text;
@@ -160,7 +189,7 @@ export function mountPresets(studio) {
     }
     presets = m.presets;
     const shown = presets.find((p) => p.name === selected);
-    if (shown && !dirty) load(shown); // a hot-reloaded change of the preset being looked at
+    if (shown && !dirty && !following.size) load(shown); // a hot-reloaded change of the preset being looked at
     renderList();
     renderButtons();
     const broken = m.errors.map((e) => e.message);
@@ -170,6 +199,8 @@ export function mountPresets(studio) {
   studio.on("error", (m) => {
     if (typeof m.id === "string" && m.id.startsWith("audition-")) error.textContent = m.message;
   });
+
+  studio.on("knobs-shown", (knobs) => { if (following.size) follow(knobs); });
 
   // ------------------------------------------------------------------ actions
   filter.addEventListener("input", renderList);
@@ -182,7 +213,10 @@ export function mountPresets(studio) {
     const name = saveName.value.trim();
     const existing = presets.find((p) => p.name === name);
     const editingInPlace = existing && existing.origin === "user" && selected === name;
-    const body = { ...values(), name, like: selected, overwrite: Boolean(editingInPlace || replaceName === name) };
+    const body = {
+      ...values(), name, channel: studio.channel(), like: selected,
+      overwrite: Boolean(editingInPlace || replaceName === name),
+    };
     try {
       const result = await studio.fetchJSON("/api/presets", {
         method: "POST",
