@@ -11,6 +11,7 @@ from vibsynth.control import clips, spatial
 from vibsynth.control.clips.player import ClipPlayer
 from vibsynth.control.osc.codec import encode_message
 from vibsynth.control.osc.handler import OscHandler
+from vibsynth.control.osc.tables import register_tables
 from vibsynth.errors import VibsynthError
 
 RAMP = make_clip([(0, 0.2, -1.0), (200, 0.8, 1.0), (400, 0.8, 1.0)], duration_ms=400, name="ramp")
@@ -90,7 +91,7 @@ def test_stop_and_a_new_play_leave_no_stale_sample(rig):
 
 
 def test_source_play_over_osc_and_without_a_layout(rig, basis):
-    handler = OscHandler(rig.controller, sync_worker=None)
+    handler = register_tables(OscHandler(rig.controller, sync_worker=None))
     peer = FakePeer()
     handler.handle_packet(encode_message("/vibsynth/source/1/play", ("ramp", 1.0, 2.0), "sff"), peer)
     assert peer.errors() == [] and rig.player.sources.names() == {0: "ramp"}

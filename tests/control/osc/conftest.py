@@ -6,6 +6,7 @@ import pytest
 
 from tests.control.osc.fakes import FakePeer, make_controller
 from vibsynth.control.osc.handler import OscHandler
+from vibsynth.control.osc.tables import register_tables
 
 
 @pytest.fixture
@@ -15,7 +16,7 @@ def ctl():
 
 @pytest.fixture
 def handler(ctl):
-    return OscHandler(ctl, sync_worker=None)
+    return register_tables(OscHandler(ctl, sync_worker=None))
 
 
 @pytest.fixture

@@ -14,6 +14,7 @@ from vibsynth.control.clips.player import ClipPlayer
 from vibsynth.control.controller import Controller
 from vibsynth.control.osc.codec import encode_bundle, encode_message, unix_to_ntp
 from vibsynth.control.osc.handler import OscHandler
+from vibsynth.control.osc.tables import register_tables
 from vibsynth.engine.bank import BankSpec, build_bank
 from vibsynth.engine.engine import Engine
 from vibsynth.formats.basis_file import default_basis
@@ -35,7 +36,7 @@ def rig(bank, tmp_path):
     library = ClipLibrary(shipped_clips_dir(), tmp_path)
     player = ClipPlayer(controller, library.get, start_margin_frames=0)
     clips.attach(controller, player)
-    handler = OscHandler(controller, sync_worker=None)
+    handler = register_tables(OscHandler(controller, sync_worker=None))
     yield engine, controller, player, handler
     clips.detach(controller, player)
 
@@ -146,7 +147,7 @@ def test_bad_stops_and_queries(rig):
 
 def test_without_a_player_play_is_refused_politely(bank):
     controller = Controller(Engine(bank, channels=1, max_block=BLOCK))
-    handler = OscHandler(controller, sync_worker=None)
+    handler = register_tables(OscHandler(controller, sync_worker=None))
     assert send(handler, "/vibsynth/play", "impact").errors() == [
         ("/vibsynth/play", "clips are not available (no clip player is running)")
     ]

@@ -28,6 +28,7 @@ from vibsynth.control.osc.codec import (
 )
 from vibsynth.control.osc.handler import OscHandler
 from vibsynth.control.osc.server import OscServer
+from vibsynth.control.osc.tables import register_tables
 
 N_PACKETS = 100_000
 CHANNELS = 4
@@ -138,7 +139,7 @@ def test_fuzz_handler_100k():
     rng = random.Random(SEED)
     corpus = Corpus(rng)
     ctl = make_controller(CHANNELS)
-    handler = OscHandler(ctl, error_reply_rate=1000.0)
+    handler = register_tables(OscHandler(ctl, error_reply_rate=1000.0))
     peer = FakePeer()
     expected_errors = 0
     flips = 0
@@ -181,7 +182,7 @@ def test_invalid_packets_counted_exactly_once():
     rng = random.Random(SEED + 1)
     corpus = Corpus(rng)
     ctl = make_controller(CHANNELS)
-    handler = OscHandler(ctl)
+    handler = register_tables(OscHandler(ctl))
     before = knob_state(ctl)
     expected = 0
     for _ in range(5000):
@@ -273,7 +274,7 @@ def test_fuzz_batches_match_the_model():
     rng = random.Random(SEED + 4)
     corpus = Corpus(rng)
     ctl = make_controller(CHANNELS)
-    handler = OscHandler(ctl, error_reply_rate=1000.0)
+    handler = register_tables(OscHandler(ctl, error_reply_rate=1000.0))
     peer = FakePeer()
     expected_errors = 0
     for _ in range(500):

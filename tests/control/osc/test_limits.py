@@ -23,6 +23,7 @@ from vibsynth.control.osc.codec import MalformedPacket, Message, decode_packet, 
 from vibsynth.control.osc.handler import OscHandler
 from vibsynth.control.osc.replies import REPLY_AMPLIFICATION, fit_osc_string, redact_paths
 from vibsynth.control.osc.server import OscServer
+from vibsynth.control.osc.tables import register_tables
 from vibsynth.control.osc.transport import SlipDecoder, slip_encode
 from vibsynth.errors import ConfigError, PresetError
 from vibsynth.settings.allow_list import AllowList, parse_allow_list
@@ -39,7 +40,7 @@ class DatagramPeer(FakePeer):
 
 
 def _handler(ctl: Controller) -> OscHandler:
-    return OscHandler(ctl, sync_worker=None, error_reply_rate=1e9)
+    return register_tables(OscHandler(ctl, sync_worker=None, error_reply_rate=1e9))
 
 
 def _reply_bytes(peer: FakePeer) -> int:
@@ -237,7 +238,7 @@ def test_allow_values_the_config_accepts_start_the_server(tmp_path, value):
         assert "Traceback" not in str(exc)
         return
     assert value in ACCEPTED, f"the validator accepted {value!r}"
-    server = osc_adapter.create(config, None, make_controller(1), None)
+    server = osc_adapter.create(config.settings, None, make_controller(1), None)
     server.start()  # what the validator accepts, the server takes
     try:
         allowed = parse_allow_list(value)
@@ -402,15 +403,13 @@ def test_tcp_limits_from_the_config(tmp_path):
         "  tcp_idle_timeout_s: 5\n",
         encoding="utf-8",
     )
-    server = osc_adapter.create(load_config(path, env={}), None, make_controller(1), None)
+    server = osc_adapter.create(load_config(path, env={}).settings, None, make_controller(1), None)
     assert (server.tcp.max_connections, server.tcp.max_per_peer, server.tcp.idle_timeout_s) == (9, 2, 5.0)
     path.write_text("version: 1\nosc:\n  tcp_max_per_peer: 0\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"c.yaml:3: osc.tcp_max_per_peer = 0"):
         load_config(path, env={})
-    config = load_config(env={}, user_file=False)
-    config.data["osc"]["tcp_idle_timeout_s"] = float("nan")
     with pytest.raises(ConfigError, match="osc.tcp_idle_timeout_s"):
-        osc_adapter.create(config, None, make_controller(1), None)
+        load_config(overrides={"osc.tcp_idle_timeout_s": float("nan")}, env={}, user_file=False)
 
 
 def test_status_reports_the_limit_counters():

@@ -13,19 +13,14 @@ the controller's running :class:`~vibsynth.control.clips.player.ClipPlayer`
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
-
 from vibsynth.control.clips import player_of
 from vibsynth.control.clips.player import ClipPlayer
 from vibsynth.control.clips.status import clip_values
-from vibsynth.control.controller import check_range
+from vibsynth.control.controller import Controller, check_range
 from vibsynth.control.osc.codec import Message, encode_message
-from vibsynth.control.osc.handler import _arg_count, _number, _string
+from vibsynth.control.osc.methods import Getter, Method, arg_count, number, string
 from vibsynth.control.osc.workers import PeerLike
-from vibsynth.errors import ClipError, ParameterError, VibsynthError
-
-if TYPE_CHECKING:
-    from vibsynth.control.osc.handler import OscHandler
+from vibsynth.errors import ParameterError, VibsynthError
 
 __all__ = ["SOURCE", "ClipMethods"]
 
@@ -33,13 +28,22 @@ SOURCE = "osc"
 
 
 class ClipMethods:
-    """The clip addresses of one :class:`~vibsynth.control.osc.handler.OscHandler`."""
+    """The clip addresses: a method table (:class:`~vibsynth.control.osc.methods.MethodTable`).
 
-    def __init__(self, handler: OscHandler) -> None:
-        self.handler = handler
+    Parameters
+    ----------
+    controller : Controller
+        Its running clip player plays and stops; its state answers ``get clip``.
+    prefix : str
+        The server's address prefix (``/vibsynth``), for the ``get clip`` answers.
+    """
 
-    def methods(self) -> dict[str, Any]:
-        """Method name -> handler function (``(msg, channels, peer, at_frame)``), for the handler's table."""
+    def __init__(self, controller: Controller, prefix: str) -> None:
+        self.controller = controller
+        self.prefix = prefix
+
+    def methods(self) -> dict[str, Method]:
+        """Method name -> method, for the handler's table (unknown clips raise ClipError: ``osc.clip``)."""
         return {
             "play": self.on_play,
             "stop": self.on_stop,
@@ -47,45 +51,39 @@ class ClipMethods:
             "source/stop": self.on_source_stop,
         }
 
+    def getters(self) -> dict[str, Getter]:
+        """``get clip``: what plays on each channel."""
+        return {"clip": self.reply_get}
+
     def _player(self) -> ClipPlayer:
-        player = player_of(self.handler.controller)
+        player = player_of(self.controller)
         if player is None:
             raise VibsynthError("clips are not available (no clip player is running)")
         return player
 
     @staticmethod
     def _play_args(msg: Message) -> tuple[str, float, float, float]:
-        _arg_count(msg, (1, 2, 3, 4), "clip name, then optional gain, rate, loops")
-        name = _string(msg, 0, "clip")
-        gain = _number(msg, 1, "gain") if len(msg.args) > 1 else 1.0
-        rate = _number(msg, 2, "rate") if len(msg.args) > 2 else 1.0
-        loops = _number(msg, 3, "loops") if len(msg.args) > 3 else 1.0
+        arg_count(msg, (1, 2, 3, 4), "clip name, then optional gain, rate, loops")
+        name = string(msg, 0, "clip")
+        gain = number(msg, 1, "gain") if len(msg.args) > 1 else 1.0
+        rate = number(msg, 2, "rate") if len(msg.args) > 2 else 1.0
+        loops = number(msg, 3, "loops") if len(msg.args) > 3 else 1.0
         if len(name) > 128:
             raise ParameterError(f"clip name longer than 128 characters ({len(name)})")
         return name, gain, rate, loops
 
     def _release_s(self, msg: Message) -> float | None:
-        _arg_count(msg, (0, 1), "optional release in ms")
+        arg_count(msg, (0, 1), "optional release in ms")
         if not msg.args:
             return None
-        max_ms = self.handler.controller.limits.glide_max_s * 1000.0
-        return check_range("release (ms)", _number(msg, 0, "release"), 0.0, max_ms) / 1000.0
+        max_ms = self.controller.limits.glide_max_s * 1000.0
+        return check_range("release (ms)", number(msg, 0, "release"), 0.0, max_ms) / 1000.0
 
     def on_play(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
         name, gain, rate, loops = self._play_args(msg)
-        player = self._player()
-        try:
-            player.play(
-                name,
-                channels=channels,
-                gain=gain,
-                rate=rate,
-                loops=loops,
-                at_frame=at_frame,
-                source=SOURCE,
-            )
-        except ClipError as exc:  # unknown clip (with "did you mean"), or a broken clip file
-            self.handler._error(peer, msg.address, str(exc), "osc.clip")
+        self._player().play(
+            name, channels=channels, gain=gain, rate=rate, loops=loops, at_frame=at_frame, source=SOURCE
+        )
 
     def on_stop(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
         release_s = self._release_s(msg)
@@ -95,10 +93,7 @@ class ClipMethods:
         self, msg: Message, sources: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None
     ) -> None:
         name, gain, rate, loops = self._play_args(msg)
-        try:
-            self._player().play_source(name, sources=sources, gain=gain, rate=rate, loops=loops, at_frame=at_frame)
-        except ClipError as exc:
-            self.handler._error(peer, msg.address, str(exc), "osc.clip")
+        self._player().play_source(name, sources=sources, gain=gain, rate=rate, loops=loops, at_frame=at_frame)
 
     def on_source_stop(
         self, msg: Message, sources: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None
@@ -109,8 +104,8 @@ class ClipMethods:
     # ------------------------------------------------------------------ queries
     def reply_get(self, peer: PeerLike, channels: tuple[int, ...] | None) -> None:
         """Answer ``get clip``: one ``/ch/{n}/clip s f i`` per channel (the global form when all agree)."""
-        prefix = self.handler.prefix
-        controller = self.handler.controller
+        prefix = self.prefix
+        controller = self.controller
         chans = range(controller.channels) if channels is None else channels
         per_channel = {c: clip_values(controller, c) for c in chans}
         if channels is None and len(set(per_channel.values())) == 1:

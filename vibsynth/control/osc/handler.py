@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from functools import partial
 
 from vibsynth.control.clips.status import clip_status
-from vibsynth.control.controller import Controller, KnobEvent, check_finite, check_range
+from vibsynth.control.controller import Controller, KnobEvent, check_range
 from vibsynth.control.midi import learn_hook as _midi_learn_hook
 from vibsynth.control.osc.address import AddressSpace
 from vibsynth.control.osc.clock import StreamClock
@@ -37,6 +37,11 @@ from vibsynth.control.osc.codec import (
     iter_messages,
     ntp_to_unix,
 )
+from vibsynth.control.osc.methods import Getter, Method, MethodTable, OscArgumentError
+from vibsynth.control.osc.methods import arg_count as _arg_count
+from vibsynth.control.osc.methods import flag as _flag
+from vibsynth.control.osc.methods import number as _number
+from vibsynth.control.osc.methods import string as _string
 from vibsynth.control.osc.monitor import MonitorWorker, describe_message, describe_sender
 from vibsynth.control.osc.replies import (
     REPLY_AMPLIFICATION,
@@ -46,23 +51,19 @@ from vibsynth.control.osc.replies import (
     is_loopback,
     redact_paths,
 )
-from vibsynth.control.osc.sources import SourceMethods
 from vibsynth.control.osc.speed import SpeedCurve
 from vibsynth.control.osc.workers import Notifier, PeerLike, SyncWorker, setter_message
 from vibsynth.control.status import channel_status, engine_status, output_status
 from vibsynth.control.tap import InputTap
-from vibsynth.errors import ParameterError, PresetError, ScheduleFullError, VibsynthError
+from vibsynth.errors import ClipError, ParameterError, PresetError, ScheduleFullError, VibsynthError
 
 log = logging.getLogger(__name__)
 
 SOURCE = "osc"
 SPEED_SOURCE = "osc-speed"
-_NUMERIC = frozenset("ifdh")
 _COALESCED = frozenset({"intensity", "balance", "texture", "speed"})
-
-
-class OscArgumentError(ParameterError):
-    """Wrong number or type of OSC arguments."""
+#: The settings ``get`` answers itself (registered tables add theirs, e.g. ``clip``).
+_GET_FIELDS = ("intensity", "balance", "glide", "mute", "preset", "texture", "driver")
 
 
 @dataclass
@@ -95,36 +96,6 @@ class _TokenBucket:
             self.tokens -= 1.0
             return True
         return False
-
-
-def _arg_count(msg: Message, allowed: Sequence[int], what: str) -> None:
-    if len(msg.args) not in allowed:
-        want = " or ".join(str(n) for n in allowed)
-        raise OscArgumentError(f"expects {want} argument(s) ({what}), got {len(msg.args)}")
-
-
-def _number(msg: Message, index: int, name: str) -> float:
-    tag = msg.types[index] if index < len(msg.types) else "?"
-    if tag not in _NUMERIC:
-        raise OscArgumentError(f"{name} must be a number (OSC type i, f, d or h), got type {tag!r}")
-    return check_finite(name, msg.args[index])
-
-
-def _string(msg: Message, index: int, name: str) -> str:
-    tag = msg.types[index] if index < len(msg.types) else "?"
-    if tag not in "sS":
-        raise OscArgumentError(f"{name} must be a string (OSC type s), got type {tag!r}")
-    return str(msg.args[index])
-
-
-def _flag(msg: Message, index: int, name: str) -> bool:
-    tag = msg.types[index] if index < len(msg.types) else "?"
-    if tag in "TF":
-        return bool(msg.args[index])
-    value = _number(msg, index, name)
-    if value not in (0.0, 1.0):
-        raise ParameterError(f"{name} must be 0 or 1, got {value:g}")
-    return value == 1.0
 
 
 class OscHandler:
@@ -188,7 +159,7 @@ class OscHandler:
         self.stats = OscStats()
         self._error_bucket = _TokenBucket(error_reply_rate)
         self._error_address = f"{self.prefix}/error"
-        self._methods: dict[str, Callable[[Message, tuple[int, ...] | None, PeerLike, int | None], None]] = {
+        self._methods: dict[str, Method] = {
             "intensity": self._on_intensity,
             "balance": self._on_balance,
             "texture": self._on_texture,
@@ -205,11 +176,7 @@ class OscHandler:
             "learn": self._on_learn,
             "monitor": self._on_monitor,
         }
-        self._methods.update(SourceMethods(self).methods())  # /vibsynth/source/{k}/... (control/osc/sources.py)
-        from vibsynth.control.osc.clips import ClipMethods  # imports this module (argument helpers)
-
-        self.clips = ClipMethods(self)  # play, stop (docs/clips.md)
-        self._methods.update(self.clips.methods())
+        self._getters: dict[str, Getter] = {}  # get NAME answered by a registered table (see register)
         # balance set by anything but /speed: the base that the speed shift is added to
         self._base_balance = [s.balance for s in controller.state()]
         # coalescing of immediate knob moves within one receive batch (see handle_batch)
@@ -219,6 +186,23 @@ class OscHandler:
         self._unsubscribe: Callable[[], None] | None = None
         if self.speed_curve.balance_per_decade != 0.0:
             self._unsubscribe = controller.subscribe(self._track_balance)
+
+    def register(self, table: MethodTable) -> None:
+        """Take on a table's methods and ``get`` names (the sources', the clips': control/osc/tables.py).
+
+        A route whose method no table registered is answered with an error (not available).
+
+        Raises
+        ------
+        ParameterError
+            A name the handler already has (each method has one definition).
+        """
+        methods, getters = dict(table.methods()), dict(table.getters())
+        taken = (methods.keys() & self._methods.keys()) | (getters.keys() & {*self._getters, *_GET_FIELDS})
+        if taken:
+            raise ParameterError(f"OSC methods registered twice: {', '.join(sorted(taken))}")
+        self._methods.update(methods)
+        self._getters.update(getters)
 
     def close(self) -> None:
         """Detach from the controller."""
@@ -314,14 +298,20 @@ class OscHandler:
         for method, channels in calls:
             if self._pending and (at_frame is not None or method not in _COALESCED):
                 self.flush()  # keep order with everything that is not coalesced
+            call = self._methods.get(method)
+            if call is None:
+                self._error(peer, msg.address, f"{method}: not available on this server", "osc.unavailable")
+                continue
             try:
-                self._methods[method](msg, channels, peer, at_frame)
+                call(msg, channels, peer, at_frame)
             except OscArgumentError as exc:
                 self._error(peer, msg.address, f"{method}: {exc}", "osc.bad_arguments")
             except PresetError as exc:
                 self._error(peer, msg.address, str(exc), "osc.preset")
             except ScheduleFullError as exc:
                 self._error(peer, msg.address, str(exc), "osc.schedule_full")
+            except ClipError as exc:  # unknown clip (with "did you mean"), or a broken clip file
+                self._error(peer, msg.address, str(exc), "osc.clip")
             except ParameterError as exc:
                 self._error(peer, msg.address, str(exc), "osc.invalid_value")
             except VibsynthError as exc:
@@ -485,12 +475,12 @@ class OscHandler:
     def _on_get(self, msg: Message, channels, peer, at_frame) -> None:
         _arg_count(msg, (1,), "setting name")
         name = _string(msg, 0, "setting")
-        fields = ("intensity", "balance", "glide", "mute", "preset")
-        if name == "clip":
-            self.clips.reply_get(peer, channels)
+        getter = self._getters.get(name)
+        if getter is not None:
+            getter(peer, channels)
             return
-        if name not in fields and name not in ("texture", "driver"):
-            known = ", ".join((*fields, "texture", "driver", "clip"))
+        if name not in _GET_FIELDS:
+            known = ", ".join((*_GET_FIELDS, *self._getters))
             raise ParameterError(f"unknown setting {name!r}; known: {known}")
         states = self.controller.state()
         chans = range(len(states)) if channels is None else channels

@@ -13,6 +13,7 @@ from vibsynth.control.osc.handler import OscHandler
 from vibsynth.control.osc.monitor import MonitorWorker
 from vibsynth.control.osc.replies import _LOOPBACK
 from vibsynth.control.osc.speed import SpeedCurve
+from vibsynth.control.osc.tables import register_tables
 from vibsynth.control.osc.transport import (
     DEFAULT_RCVBUF,
     TCP_IDLE_TIMEOUT_S,
@@ -85,6 +86,7 @@ class OscServer:
             tap=self.tap,
             monitor=self.monitor,
         )
+        register_tables(self.handler)
         self.udp = UdpTransport(
             host,
             port,

@@ -11,18 +11,16 @@ saying so.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
 
 from vibsynth.control import spatial
+from vibsynth.control.controller import Controller
 from vibsynth.control.osc.codec import Message, encode_message
+from vibsynth.control.osc.methods import Getter, Method, arg_count, flag, number, string
 from vibsynth.control.osc.workers import PeerLike
 from vibsynth.control.spatial.mixer import SourceMixer, Update
 from vibsynth.control.spatial.sources import SETTING_NAMES, SourceTable, SourceView
 from vibsynth.dsp.spatial import check_rolloff
 from vibsynth.errors import ParameterError, VibsynthError
-
-if TYPE_CHECKING:
-    from vibsynth.control.osc.handler import OscHandler
 
 __all__ = ["SourceMethods", "NO_LAYOUT"]
 
@@ -32,24 +30,21 @@ NO_LAYOUT = (
     "see docs/vr.md) and restart the server"
 )
 
-Method = Callable[[Message, "tuple[int, ...] | None", PeerLike, "int | None"], None]
-
 
 class SourceMethods:
-    """The source methods of an OSC handler (:class:`~vibsynth.control.osc.handler.OscHandler`).
+    """The source methods: a method table (:class:`~vibsynth.control.osc.methods.MethodTable`).
 
     Parameters
     ----------
-    handler : OscHandler
-        Gives the controller (to find the mixer), the prefix and the argument checks.
+    controller : Controller
+        Its running mixer (:func:`vibsynth.control.spatial.mixer_of`) takes the changes.
+    prefix : str
+        The server's address prefix (``/vibsynth``), for the ``get`` answers.
     """
 
-    def __init__(self, handler: OscHandler) -> None:
-        from vibsynth.control.osc import handler as module  # the argument checks live there (it imports this)
-
-        self._args = module
-        self.prefix = handler.prefix
-        self.controller = handler.controller
+    def __init__(self, controller: Controller, prefix: str) -> None:
+        self.prefix = prefix
+        self.controller = controller
 
     def methods(self) -> dict[str, Method]:
         """``source/<method>`` -> the function the handler calls with the 0-based source indices."""
@@ -65,6 +60,10 @@ class SourceMethods:
             "source/speed": self._on_speed,
             "source/get": self._on_get,
         }
+
+    def getters(self) -> dict[str, Getter]:
+        """None: a source's settings are read with ``/vibsynth/source/{k}/get`` (a method above)."""
+        return {}
 
     # ------------------------------------------------------------------ helpers
     def _mixer(self) -> SourceMixer:
@@ -85,76 +84,66 @@ class SourceMethods:
 
     # ------------------------------------------------------------------ setters
     def _on_pos(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (2, 3), "x, y[, z] in metres")
+        arg_count(msg, (2, 3), "x, y[, z] in metres")
         mixer = self._mixer()
-        position = mixer.table.check_position(tuple(a._number(msg, i, "xyz"[i]) for i in range(len(msg.args))))
+        position = mixer.table.check_position(tuple(number(msg, i, "xyz"[i]) for i in range(len(msg.args))))
         mixer.apply(self._each(sources, lambda table, i, t: table.set_position(i, position, t)), at_frame=at_frame)
 
     def _on_texture(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (2,), "intensity, balance")
+        arg_count(msg, (2,), "intensity, balance")
         mixer = self._mixer()
-        intensity = mixer.table.check_intensity(a._number(msg, 0, "intensity"))
-        balance = mixer.table.check_balance(a._number(msg, 1, "balance"))
+        intensity = mixer.table.check_intensity(number(msg, 0, "intensity"))
+        balance = mixer.table.check_balance(number(msg, 1, "balance"))
         mixer.apply(
             self._each(sources, lambda table, i, t: table.set_texture(i, intensity, balance)), at_frame=at_frame
         )
 
     def _on_intensity(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (1,), "intensity 0..1")
+        arg_count(msg, (1,), "intensity 0..1")
         mixer = self._mixer()
-        intensity = mixer.table.check_intensity(a._number(msg, 0, "intensity"))
+        intensity = mixer.table.check_intensity(number(msg, 0, "intensity"))
         mixer.apply(
             self._each(sources, lambda table, i, t: table.set_texture(i, intensity=intensity)), at_frame=at_frame
         )
 
     def _on_balance(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (1,), "balance")
+        arg_count(msg, (1,), "balance")
         mixer = self._mixer()
-        balance = mixer.table.check_balance(a._number(msg, 0, "balance"))
+        balance = mixer.table.check_balance(number(msg, 0, "balance"))
         mixer.apply(self._each(sources, lambda table, i, t: table.set_texture(i, balance=balance)), at_frame=at_frame)
 
     def _on_preset(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (1,), "preset name")
+        arg_count(msg, (1,), "preset name")
         mixer = self._mixer()
-        preset = mixer.table.resolve_preset(a._string(msg, 0, "preset"))
+        preset = mixer.table.resolve_preset(string(msg, 0, "preset"))
         mixer.apply(self._each(sources, lambda table, i, t: table.set_preset(i, preset)), at_frame=at_frame)
 
     def _on_radius(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (1,), "radius in metres")
+        arg_count(msg, (1,), "radius in metres")
         mixer = self._mixer()
-        radius = mixer.table.check_radius(a._number(msg, 0, "radius (m)"))
+        radius = mixer.table.check_radius(number(msg, 0, "radius (m)"))
         mixer.apply(self._each(sources, lambda table, i, t: table.set_radius(i, radius)), at_frame=at_frame)
 
     def _on_rolloff(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (1,), "linear, smooth, inverse-square or phantom")
+        arg_count(msg, (1,), "linear, smooth, inverse-square or phantom")
         mixer = self._mixer()
-        law = check_rolloff(a._string(msg, 0, "roll-off"))
+        law = check_rolloff(string(msg, 0, "roll-off"))
         mixer.apply(self._each(sources, lambda table, i, t: table.set_rolloff(i, law)), at_frame=at_frame)
 
     def _on_on(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (1,), "1 = on, 0 = off")
-        on = a._flag(msg, 0, "on")
+        arg_count(msg, (1,), "1 = on, 0 = off")
+        on = flag(msg, 0, "on")
         self._mixer().apply(self._each(sources, lambda table, i, t: table.set_on(i, on, t)), at_frame=at_frame)
 
     def _on_speed(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (1,), "1 = intensity from the source's speed, 0 = its own")
-        speed = a._flag(msg, 0, "speed")
+        arg_count(msg, (1,), "1 = intensity from the source's speed, 0 = its own")
+        speed = flag(msg, 0, "speed")
         self._mixer().apply(self._each(sources, lambda table, i, t: table.set_speed(i, speed)), at_frame=at_frame)
 
     # ------------------------------------------------------------------ queries
     def _on_get(self, msg: Message, sources, peer: PeerLike, at_frame: int | None) -> None:
-        a = self._args
-        a._arg_count(msg, (1,), "setting name")
-        name = a._string(msg, 0, "setting")
+        arg_count(msg, (1,), "setting name")
+        name = string(msg, 0, "setting")
         if name not in SETTING_NAMES:
             raise ParameterError(f"unknown source setting {name!r}; known: {', '.join(SETTING_NAMES)}")
         indices = tuple(sources or ())
