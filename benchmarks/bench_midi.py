@@ -27,7 +27,6 @@ import os
 import sys
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -44,6 +43,7 @@ from vibsynth.engine.bank import BankSpec, build_bank  # noqa: E402
 from vibsynth.engine.engine import Engine  # noqa: E402
 from vibsynth.formats.basis_file import default_basis  # noqa: E402
 from vibsynth.settings.config import default_config_data  # noqa: E402
+from vibsynth.settings.typed import settings_of  # noqa: E402
 
 
 def main() -> int:
@@ -69,7 +69,7 @@ def main() -> int:
     data["midi"].update(release_ms=0.0, attack_ms=0.0)
     parser = argparse.ArgumentParser()
     midi.add_arguments(parser)
-    server = midi.create(SimpleNamespace(data=data), parser.parse_args(["--midi-virtual"]), controller, None)
+    server = midi.create(settings_of(data), parser.parse_args(["--midi-virtual"]), controller, None)
     if server is None:
         print("bench_midi: no MIDI backend (is JACK running? MIDO_BACKEND?)", file=sys.stderr)
         return 2

@@ -64,25 +64,22 @@ def _stats(values_ms: list[float]) -> dict[str, float]:
 def start_service(output: str) -> SimpleNamespace:
     """Engine, output, Controller, OSC server and studio, wired like ``vibsynth serve`` (one channel)."""
     from vibsynth.app.service import build_engine, open_output
-    from vibsynth.control.controller import Controller, KnobLimits
+    from vibsynth.control.controller import Controller
     from vibsynth.control.osc import adapter as osc_adapter
     from vibsynth.control.studio import adapter as studio_adapter
-    from vibsynth.settings.config import load_config, settings_of
+    from vibsynth.settings.config import load_config
 
-    config = load_config(env={}, user_file=False)
-    config.data["audio"]["backend"] = output
-    config.data["audio"]["channels"] = 1
-    config.data["osc"]["port"] = 0
-    knobs = settings_of(config).knobs
-    engine = build_engine(config)
-    controller = Controller(engine, limits=KnobLimits(knobs.balance_min, knobs.balance_max), initial_glide_s=0.0)
+    overrides = {"audio.backend": output, "audio.channels": 1, "osc.port": 0}
+    settings = load_config(overrides=overrides, env={}, user_file=False).settings
+    engine = build_engine(settings)
+    controller = Controller.for_knobs(engine, settings.knobs)
     controller.set_glide(0.0, source="benchmark")  # a move is applied in one block: its arrival is visible
-    out = open_output(config, engine, output == "sounddevice")
+    out = open_output(settings.audio, engine, output == "sounddevice")
     controller.output = out  # type: ignore[attr-defined]
-    osc = osc_adapter.create(config, None, controller)
+    osc = osc_adapter.create(settings, None, controller)
     osc.start()
     args = SimpleNamespace(no_studio=False, studio_port=0, studio_token=None)
-    studio = studio_adapter.create(config, args, controller, None, servers=[osc])
+    studio = studio_adapter.create(settings, args, controller, None, servers=[osc])
     studio.start()
     out.start()
     return SimpleNamespace(engine=engine, controller=controller, output=out, osc=osc, studio=studio)

@@ -54,11 +54,11 @@ def engine(bank) -> Engine:
 
 @pytest.fixture(scope="module")
 def config():
-    return load_config(user_file=False)
+    return load_config(user_file=False).settings
 
 
 def test_the_render_follows_the_keyframes_in_level_and_balance(bank, basis, config):
-    x, fs = render_clip(STAIRS, config=config, engine=engine(bank))
+    x, fs = render_clip(STAIRS, settings=config, engine=engine(bank))
     assert fs == FS and x.shape == (int(2.0 * FS) + int(round((0.02 + TAIL_S) * FS)), 1)
     signal = x[:, 0].astype(np.float64)
 
@@ -82,7 +82,7 @@ def test_the_render_follows_the_keyframes_in_level_and_balance(bank, basis, conf
 
 
 def test_the_render_is_what_the_live_player_plays_sample_for_sample(bank, config):
-    offline, _ = render_clip(STAIRS, config=config, engine=engine(bank), gain=0.9, rate=1.5, loops=2)
+    offline, _ = render_clip(STAIRS, settings=config, engine=engine(bank), gain=0.9, rate=1.5, loops=2)
     live_engine = engine(bank)
     controller = Controller(live_engine, initial_glide_s=0.02)
     player = ClipPlayer(controller, lambda name: STAIRS, start_margin_frames=0)
@@ -98,8 +98,8 @@ def test_the_render_is_what_the_live_player_plays_sample_for_sample(bank, config
 
 def test_endless_loops_need_a_length_and_stream_for_as_long_as_asked(bank, config):
     with pytest.raises(ParameterError, match="loops 0 repeats the clip until stopped"):
-        prepare_clip_render(STAIRS, config=config, engine=engine(bank), loops=0)
-    job = prepare_clip_render(STAIRS, config=config, engine=engine(bank), loops=0, seconds=7.0)
+        prepare_clip_render(STAIRS, settings=config, engine=engine(bank), loops=0)
+    job = prepare_clip_render(STAIRS, settings=config, engine=engine(bank), loops=0, seconds=7.0)
     assert job.frames == int(7 * FS) and job.clip_timeline.end_frame is None
 
 

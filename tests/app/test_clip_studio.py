@@ -78,7 +78,7 @@ def controller():
 @pytest.fixture
 def lane(controller, user_dir):
     config = load_config(env={}, user_file=False, overrides={"clips.user_dir": str(user_dir)})
-    server = StudioServer(controller, port=0, extensions=studio_extensions(config, controller, None))
+    server = StudioServer(controller, port=0, extensions=studio_extensions(config.settings, controller, None))
     server.start()
     yield server
     server.stop()
@@ -240,6 +240,6 @@ def test_play_refusals_name_the_problem_and_play_nothing(lane, controller, body,
 
 def test_the_extension_uses_the_configured_folder(tmp_path, controller):
     config = load_config(env={}, user_file=False, overrides={"clips.user_dir": str(tmp_path / "c")})
-    extension = studio_extension(config, controller, None)
+    extension = studio_extension(config.settings, controller, None)
     extension.check()
     assert extension.name == "clips" and Path(extension.script).name == "clip_tab.js"

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import mido
 import numpy as np
 import pytest
@@ -16,6 +14,7 @@ from vibsynth.engine.commands import SetKnob
 from vibsynth.engine.engine import Engine
 from vibsynth.formats.basis_file import default_basis
 from vibsynth.settings.config import default_config_data
+from vibsynth.settings.typed import settings_of
 
 FS = 8000.0  # bands reach 1 kHz; a low rate keeps the test fast
 STEP_S = 0.0625  # one 7-bit CC step every 62.5 ms: a 8 s sweep over 128 values
@@ -52,7 +51,7 @@ def write_sweep(path, *, start_s: float = 0.5) -> None:
 def config(**midi):
     data = default_config_data()
     data["midi"].update(mode="continuous", **midi)
-    return SimpleNamespace(data=data)
+    return settings_of(data)
 
 
 def t1_frames(x: np.ndarray, basis) -> np.ndarray:
@@ -75,7 +74,7 @@ def ideal_ramp(bank, seconds: float, start_s: float = 0.5) -> np.ndarray:
 def test_cc_sweep_renders_monotonic_t1(tmp_path, bank, basis):
     path = tmp_path / "sweep.mid"
     write_sweep(path)
-    x, fs = render_midi_file(path, config=config(), engine=make_engine(bank), seconds=9.0)
+    x, fs = render_midi_file(path, settings=config(), engine=make_engine(bank), seconds=9.0)
     assert fs == FS and x.dtype == np.float32 and x.shape == (int(9.0 * FS), 1)
     assert np.abs(x).max() > 0
     t1 = t1_frames(x[:, 0].astype(np.float64), basis)
@@ -107,8 +106,8 @@ def test_cc_sweep_has_no_zipper_steps(tmp_path, bank):
     write_sweep(path)
     seconds = 9.0
     ideal = ideal_ramp(bank, seconds)
-    smooth, _ = render_midi_file(path, config=config(), engine=make_engine(bank), seconds=seconds)
-    stairs, _ = render_midi_file(path, config=config(cc_glide_max_ms=0), engine=make_engine(bank), seconds=seconds)
+    smooth, _ = render_midi_file(path, settings=config(), engine=make_engine(bank), seconds=seconds)
+    stairs, _ = render_midi_file(path, settings=config(cc_glide_max_ms=0), engine=make_engine(bank), seconds=seconds)
     a, b = int(0.6 * FS), int(8.4 * FS)
     smooth_db = _residual_db(smooth[:, 0], ideal, a, b)
     stairs_db = _residual_db(stairs[:, 0], ideal, a, b)
@@ -133,7 +132,7 @@ def test_notes_gate_the_texture_in_a_file(tmp_path, bank):
     mid.save(path)
     data = default_config_data()
     data["midi"].update(mode="gate", release_ms=100.0)
-    x, _ = render_midi_file(path, config=SimpleNamespace(data=data), engine=make_engine(bank))
+    x, _ = render_midi_file(path, settings=settings_of(data), engine=make_engine(bank))
     rms = lambda t0, t1: float(np.sqrt(np.mean(x[int(t0 * FS) : int(t1 * FS), 0] ** 2)))  # noqa: E731
     assert x.shape[0] == int(round((2.0 + 0.1 + 0.25) * FS))
     assert rms(0.0, 0.45) == 0.0
@@ -155,6 +154,6 @@ def test_render_through_service_build_engine(tmp_path):
     mid.save(path)
     cfg = load_config(overrides={"bank": {"levels": 5, "loop_seconds": 1.0, "cache_dir": ""}, "audio": {"rate": 8000}})
     assert hasattr(service, "build_engine")
-    x, fs = render_midi_file(path, config=cfg)
+    x, fs = render_midi_file(path, settings=cfg.settings)
     assert fs == 8000 and x.shape[0] == int(round((0.5 + 0.15 + 0.25) * fs))
     assert np.abs(x[: int(0.4 * fs)]).max() > 0

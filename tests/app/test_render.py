@@ -36,6 +36,7 @@ from vibsynth.errors import ParameterError
 from vibsynth.formats.recordings import write_wav
 from vibsynth.formats.wav_stream import WavStreamWriter
 from vibsynth.settings.config import default_config_data
+from vibsynth.settings.typed import settings_of
 
 ROOT = Path(__file__).resolve().parents[2]
 FS = 8000.0
@@ -315,16 +316,14 @@ def test_render_long_texture_repeats_one_seamless_period(tmp_path, basis):
     np.testing.assert_array_equal(x[:period], x[-period:])
 
 
-def _old_midi_loop(path, config, engine, block=1024):
-    """The loop of vibsynth.app.midi_render before the one renderer (copied)."""
-    from vibsynth.app.midi_render import _knob_limits
+def _old_midi_loop(path, typed, engine, block=1024):
+    """The loop of vibsynth.app.midi_render before the one renderer (copied; settings made as it makes them)."""
     from vibsynth.control.controller import Controller
     from vibsynth.control.midi.bindings import MidiSettings
     from vibsynth.control.midi.mapper import MidiMapper
 
-    data = config.data
-    controller = Controller(engine, limits=_knob_limits(data), initial_glide_s=data["knobs"]["glide_ms"] / 1000.0)
-    settings = MidiSettings.from_config(data, engine.channels)
+    controller = Controller.for_knobs(engine, typed.knobs)
+    settings = MidiSettings.from_settings(typed.midi, engine.channels, fade_ms=typed.knobs.mute_fade_ms)
     mapper = MidiMapper(controller, settings, presets=None, source="midi-file")
     events, t = [], 0.0
     for msg in mido.MidiFile(str(path)):
@@ -365,19 +364,17 @@ def _performance(path: Path) -> None:
 
 @pytest.mark.parametrize("mode", ["gate", "continuous"])
 def test_midi_file_matches_the_old_loop(tmp_path, bank, mode):
-    from types import SimpleNamespace
-
     path = tmp_path / "perf.mid"
     _performance(path)
     data = default_config_data()
     data["midi"].update(mode=mode)
-    config = SimpleNamespace(data=data)
+    config = settings_of(data)
     old = _old_midi_loop(path, config, make_engine(bank))
-    new, fs = render_midi_file(path, config=config, engine=make_engine(bank))
+    new, fs = render_midi_file(path, settings=config, engine=make_engine(bank))
     assert fs == FS and np.abs(old).max() > 0
     assert new.dtype == old.dtype and np.array_equal(new, old)
     # streamed to a WAV file: the same bytes as the old loop's write_wav
-    job = prepare_midi_render(path, config=config, engine=make_engine(bank))
+    job = prepare_midi_render(path, settings=config, engine=make_engine(bank))
     with WavStreamWriter(tmp_path / "new.wav", FS, 2, frames=job.frames) as w:
         render(job.engine, job.frames, w, timeline=job.timeline, block=333)
     write_wav(tmp_path / "old.wav", old, FS)
@@ -468,7 +465,7 @@ def test_preset_play_to_wav_matches_the_old_loop(tmp_path, capsys, fmt, channels
     assert main([*args, "-o", str(out), *FAST]) == 0
     # the former loop: engine.render(block) into a whole array, then write_wav
     config = load_config(overrides={**FAST_CONFIG, "audio.channels": channels}, user_file=False)
-    engine = _preset_engine(config, load_library(config), "brick")
+    engine = _preset_engine(config.settings, load_library(config.settings), "brick")
     total, block = int(round(1.1 * engine.fs)), 256
     old = np.empty((total, channels), dtype=np.float32)
     for done in range(0, total, block):

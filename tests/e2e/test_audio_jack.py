@@ -41,7 +41,7 @@ FS = 48000
 @pytest.fixture(scope="module")
 def config(tmp_path_factory):
     cache = tmp_path_factory.mktemp("bank-cache")
-    return load_config(overrides={"audio": {"rate": FS, "block_size": 128}, "bank": {"cache_dir": str(cache)}})
+    return load_config(overrides={"audio": {"rate": FS, "block_size": 128}, "bank": {"cache_dir": str(cache)}}).settings
 
 
 @pytest.fixture
@@ -84,8 +84,8 @@ def test_a_spectrum_and_intensity(rig, config, knob, balance):
     # capture: up to 3 captures are taken and the first clean one is judged. A real defect
     # fails every capture.
     basis = default_basis()
-    knobs = config.data["knobs"]
-    expected = knob_to_level_db(knob, ceiling_db=knobs["ceiling_db"], range_db=knobs["range_db"])
+    knobs = config.knobs
+    expected = knob_to_level_db(knob, ceiling_db=knobs.ceiling_db, range_db=knobs.range_db)
     for _attempt in range(3):
         cap.reset()
         cap.arm()

@@ -159,8 +159,8 @@ def test_a_timetagged_clip_follows_its_keyframes_in_the_captured_output(clip_ser
 RECEIVER = textwrap.dedent("""
     import argparse, sys, time
     import numpy as np
-    from types import SimpleNamespace
     from vibsynth.settings.config import default_config_data
+    from vibsynth.settings.typed import settings_of
     from vibsynth.control.midi import adapter as midi
     from vibsynth.control.clips.adapter import ClipService
     from vibsynth.control.controller import Controller
@@ -181,7 +181,7 @@ RECEIVER = textwrap.dedent("""
     parser = argparse.ArgumentParser()
     midi.add_arguments(parser)
     args = parser.parse_args(["--midi-virtual"])
-    server = midi.create(SimpleNamespace(data=data), args, controller, None)
+    server = midi.create(settings_of(data), args, controller, None)
     assert server is not None, "create() returned None"
     server.start()
     print("READY", server.describe(), flush=True)

@@ -101,8 +101,8 @@ SENDER = textwrap.dedent("""
 RECEIVER = textwrap.dedent("""
     import argparse, sys, time
     import numpy as np
-    from types import SimpleNamespace
     from vibsynth.settings.config import default_config_data
+    from vibsynth.settings.typed import settings_of
     from vibsynth.control.midi import adapter as midi
     from vibsynth.control.controller import Controller
     from vibsynth.engine.bank import BankSpec, build_bank
@@ -116,7 +116,7 @@ RECEIVER = textwrap.dedent("""
     parser = argparse.ArgumentParser()
     midi.add_arguments(parser)
     args = parser.parse_args(["--midi-virtual"])
-    server = midi.create(SimpleNamespace(data=default_config_data()), args, controller, None)
+    server = midi.create(settings_of(default_config_data()), args, controller, None)
     assert server is not None, "create() returned None"
     server.start()
     print("READY", server.describe(), flush=True)

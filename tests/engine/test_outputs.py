@@ -262,7 +262,7 @@ def test_auto_falls_back_to_null_with_a_warning(small_bank, no_portaudio, caplog
     config = load_config(overrides={"audio": {"backend": "auto"}})
     e = Engine(small_bank)
     with caplog.at_level(logging.WARNING):
-        out = open_output(config, e, explicit_device=False)
+        out = open_output(config.settings.audio, e, explicit_device=False)
     assert isinstance(out, NullOutput)
     assert "falling back to the null output" in caplog.text
 
@@ -270,9 +270,11 @@ def test_auto_falls_back_to_null_with_a_warning(small_bank, no_portaudio, caplog
 def test_explicit_device_or_backend_is_an_error(small_bank, no_portaudio):
     e = Engine(small_bank)
     with pytest.raises(DeviceError):
-        open_output(load_config(overrides={"audio": {"backend": "auto"}}), e, explicit_device=True)
+        open_output(load_config(overrides={"audio": {"backend": "auto"}}).settings.audio, e, explicit_device=True)
     with pytest.raises(DeviceError):
-        open_output(load_config(overrides={"audio": {"backend": "sounddevice"}}), e, explicit_device=False)
+        open_output(
+            load_config(overrides={"audio": {"backend": "sounddevice"}}).settings.audio, e, explicit_device=False
+        )
 
 
 def test_serve_cli_exit_codes(no_portaudio, tmp_path, capsys):

@@ -22,7 +22,7 @@ BENT = ClipMapping(intensity_exponent=2.0, balance_points=(-2.0, 0.5, 3.0), tran
 
 def test_mapping_defaults_follow_the_config_and_invert():
     config = load_config(env={}, user_file=False)
-    m = ClipMapping.from_config(config)
+    m = ClipMapping.from_settings(config.settings)
     assert m == ClipMapping(1.0, (-3.5, 0.0, 3.5), 40.0)
     assert (m.balance(0.0), m.balance(0.5), m.balance(1.0), m.balance(0.75)) == (-3.5, 0.0, 3.5, 1.75)
     custom = load_config(
@@ -30,7 +30,7 @@ def test_mapping_defaults_follow_the_config_and_invert():
         user_file=False,
         overrides={"clips.sharpness_0_balance": -1, "clips.intensity_exponent": 2, "knobs.balance_max": 2},
     )
-    m2 = ClipMapping.from_config(custom)
+    m2 = ClipMapping.from_settings(custom.settings)
     assert m2.balance_points == (-1.0, 0.0, 2.0) and m2.intensity(0.5) == 0.25
     rng = np.random.default_rng(3)
     for x in rng.uniform(0, 1, 50):
@@ -48,7 +48,7 @@ def test_config_refuses_a_mapping_that_does_not_increase():
         load_config(env={}, user_file=False, overrides={"clips.sharpness_1_balance": -1})
     config = load_config(env={}, user_file=False, overrides={"clips.sharpness_half_balance": 5})
     with pytest.raises(ClipError, match=r"balances -3.5 < 5 < 3.5 at sharpness 0, 0.5, 1 must increase"):
-        ClipMapping.from_config(config)
+        ClipMapping.from_settings(config.settings)
 
 
 def test_clip_names_from_file_names():

@@ -368,14 +368,14 @@ def test_save_user_writes_and_reloads(dirs):
 
 def test_load_clip_library_uses_the_config_folder(tmp_path):
     config = load_config(env={}, user_file=False, overrides={"clips.user_dir": str(tmp_path / "mine")})
-    lib = load_clip_library(config)
+    lib = load_clip_library(config.settings)
     assert lib.user_dir == tmp_path / "mine" and lib.shipped_dir == shipped_clips_dir()
     assert "heartbeat" in lib
 
 
 def test_default_user_folder_is_the_platform_data_folder(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
-    lib = load_clip_library(load_config(env={}, user_file=False))
+    lib = load_clip_library(load_config(env={}, user_file=False).settings)
     assert lib.user_dir == tmp_path / "data" / "vibsynth" / "clips"
 
 

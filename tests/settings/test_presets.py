@@ -221,14 +221,14 @@ def test_broken_file_at_startup_is_reported_not_fatal(dirs, caplog):
 def test_load_library_uses_config_user_dir(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "cfg"))
     config = load_config(overrides={"presets.user_dir": str(tmp_path / "mine")}, env={}, user_file=False)
-    lib = load_library(config)
+    lib = load_library(config.settings)
     assert lib.user_dir == tmp_path / "mine" and lib.shipped_dir == shipped_presets_dir()
     assert len(lib) >= 12
 
 
 def test_default_user_dir_is_platform_data_dir(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
-    lib = load_library(load_config(env={}, user_file=False))
+    lib = load_library(load_config(env={}, user_file=False).settings)
     assert lib.user_dir == tmp_path / "data" / "vibsynth" / "presets"
 
 

@@ -24,7 +24,7 @@ from vibsynth.control.controller import KnobLimits
 from vibsynth.engine.commands import SetKnob
 from vibsynth.engine.engine import Engine
 from vibsynth.errors import ParameterError
-from vibsynth.settings.config import settings_of
+from vibsynth.settings.models_config import VibsynthConfig
 
 __all__ = ["TAIL_S", "ClipRender", "prepare_clip_render", "render_clip"]
 
@@ -60,7 +60,7 @@ class ClipRender:
 def prepare_clip_render(
     clip: str | ClipLike,
     *,
-    config: Any = None,
+    settings: VibsynthConfig | None = None,
     basis: Any = None,
     gain: float = 1.0,
     rate: float = 1.0,
@@ -75,8 +75,9 @@ def prepare_clip_render(
     ----------
     clip : str or Clip
         A clip name (looked up in ``library``, default the config's clip library) or a clip.
-    config : Config, optional
-        Default: the packaged defaults. Its knob limits, glide and initial knobs apply.
+    settings : VibsynthConfig, optional
+        The typed settings; default: the packaged defaults. Its knob limits, glide and initial
+        knobs apply.
     basis : Basis, optional
         For the engine's bank (default: the shipped basis).
     gain, rate, loops
@@ -95,27 +96,27 @@ def prepare_clip_render(
     ParameterError
         Gain, rate or loops out of range; ``loops`` 0 without ``seconds``; a non-positive length.
     """
-    if config is None:
-        from vibsynth.settings.config import load_config
+    if settings is None:
+        from vibsynth.settings.config import default_settings
 
-        config = load_config(user_file=False)
+        settings = default_settings()
     if isinstance(clip, str):
         if library is None:
             from vibsynth.settings.clips import load_clip_library
 
-            library = load_clip_library(config)
+            library = load_clip_library(settings)
         resolved: ClipLike = library.get(clip)
     else:
         resolved = clip
     gain, rate, loops = check_play_args(gain, rate, loops)
     if loops == 0 and seconds is None:
         raise ParameterError("loops 0 repeats the clip until stopped: give a length (--seconds)")
-    knobs = settings_of(config).knobs
+    knobs = settings.knobs
     limits = KnobLimits(balance_min=knobs.balance_min, balance_max=knobs.balance_max)
     if engine is None:
         from vibsynth.app.service import build_engine
 
-        engine = build_engine(config, basis=basis)
+        engine = build_engine(settings, basis=basis)
     fs = float(engine.fs)
     compiled = ClipTimeline(
         resolved,

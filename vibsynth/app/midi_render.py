@@ -20,18 +20,9 @@ from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import _one_line
 from vibsynth.engine.engine import Engine
 from vibsynth.errors import InputError, ParameterError
-from vibsynth.settings.config import settings_of
+from vibsynth.settings.models_config import VibsynthConfig
 
 __all__ = ["MidiRender", "prepare_midi_render", "render_midi_file", "render_midi_to"]
-
-
-def _knob_limits(data: dict[str, Any]) -> Any:
-    from vibsynth.control.controller import KnobLimits
-
-    knobs = data.get("knobs") or {}
-    return KnobLimits(
-        balance_min=float(knobs.get("balance_min", -3.5)), balance_max=float(knobs.get("balance_max", 3.5))
-    )
 
 
 @dataclass
@@ -61,7 +52,7 @@ class MidiRender:
 def prepare_midi_render(
     path: str | os.PathLike[str],
     *,
-    config: Any = None,
+    settings: VibsynthConfig | None = None,
     basis: Any = None,
     seconds: float | None = None,
     presets: Any = None,
@@ -77,8 +68,9 @@ def prepare_midi_render(
     ----------
     path : path-like
         Standard MIDI file (type 0 or 1; tempo changes honoured).
-    config : Config, optional
-        Default: the packaged defaults (``load_config(user_file=False)``).
+    settings : VibsynthConfig, optional
+        The typed settings (``knobs``, ``midi``, ``midi_clips``...); default: the packaged
+        defaults (:func:`~vibsynth.settings.config.default_settings`).
     basis : Basis, optional
         Passed to :func:`vibsynth.app.service.build_engine`.
     seconds : float, optional
@@ -87,7 +79,7 @@ def prepare_midi_render(
         For program changes.
     engine : Engine, optional
         A fresh engine to render with (tests, benchmarks); default
-        ``vibsynth.app.service.build_engine(config, basis=basis)``.
+        ``vibsynth.app.service.build_engine(settings, basis=basis)``.
     clips : ClipLibrary, optional
         For the clip notes (default: the config's clip library).
 
@@ -100,38 +92,31 @@ def prepare_midi_render(
     """
     from vibsynth.control.controller import Controller
 
-    if config is None:
-        from vibsynth.settings.config import load_config
+    if settings is None:
+        from vibsynth.settings.config import default_settings
 
-        config = load_config(user_file=False)
+        settings = default_settings()
     try:
         midi_file = mido.MidiFile(str(path))
     except (OSError, ValueError, EOFError, KeyError, IndexError) as exc:
         raise InputError(f"{path}: not a readable MIDI file ({_one_line(exc)})") from None
-    data = config.data
     if engine is None:
         from vibsynth.app.service import build_engine
 
-        engine = build_engine(config, basis=basis)
-    knobs = data.get("knobs") or {}
-    controller = Controller(
-        engine,
-        limits=_knob_limits(data),
-        initial_glide_s=float(knobs.get("glide_ms", 20.0)) / 1000.0,
-        preset_resolver=getattr(presets, "get", None),
-    )
-    settings = MidiSettings.from_config(data, engine.channels)
-    player = _clip_player(config, controller, clips)
+        engine = build_engine(settings, basis=basis)
+    controller = Controller.for_knobs(engine, settings.knobs, preset_resolver=getattr(presets, "get", None))
+    midi = MidiSettings.from_settings(settings.midi, engine.channels, fade_ms=settings.knobs.mute_fade_ms)
+    player = _clip_player(settings, controller, clips)
     clip_notes = None
     if player is not None:
-        clip_notes = ClipNotes.from_settings(settings_of(config).midi_clips, controller, player=lambda: player)
-    mapper = MidiMapper(controller, settings, presets=presets, source="midi-file", clip_notes=clip_notes)
+        clip_notes = ClipNotes.from_settings(settings.midi_clips, controller, player=lambda: player)
+    mapper = MidiMapper(controller, midi, presets=presets, source="midi-file", clip_notes=clip_notes)
     fs = float(engine.fs)
     if seconds is None:
         t = 0.0
         for msg in midi_file:  # delta times in seconds (tempo applied), summed as the timeline does
             t += float(msg.time)
-        seconds = t + settings.release_s + 0.25
+        seconds = t + midi.release_s + 0.25
     frames = int(round(float(seconds) * fs))
     if frames <= 0:
         raise ParameterError(f"render length must be positive, got {seconds!r} s")
@@ -142,14 +127,14 @@ def prepare_midi_render(
     return MidiRender(engine, timeline, frames)
 
 
-def _clip_player(config: Any, controller: Any, library: Any) -> ClipPlayer | None:
-    """A clip player for the notes of ``midi_clips`` (None when the config maps no note)."""
-    if not settings_of(config).midi_clips.notes:
+def _clip_player(settings: VibsynthConfig, controller: Any, library: Any) -> ClipPlayer | None:
+    """A clip player for the notes of ``midi_clips`` (None when the settings map no note)."""
+    if not settings.midi_clips.notes:
         return None
     if library is None:
         from vibsynth.settings.clips import load_clip_library
 
-        library = load_clip_library(config if hasattr(config, "section") else None)
+        library = load_clip_library(settings)
     return ClipPlayer(controller, library.get, start_margin_frames=0)
 
 
@@ -188,7 +173,7 @@ def render_midi_to(
 def render_midi_file(
     path: str | os.PathLike[str],
     *,
-    config: Any = None,
+    settings: VibsynthConfig | None = None,
     basis: Any = None,
     seconds: float | None = None,
     presets: Any = None,
@@ -216,7 +201,7 @@ def render_midi_file(
         (:data:`~vibsynth.app.render.MAX_COLLECT_BYTES`).
     """
     job = prepare_midi_render(
-        path, config=config, basis=basis, seconds=seconds, presets=presets, engine=engine, clips=clips
+        path, settings=settings, basis=basis, seconds=seconds, presets=presets, engine=engine, clips=clips
     )
     result = render_midi_to(job, ArrayCollector(job.frames, job.engine.channels), block=block)
     return result.output, job.fs

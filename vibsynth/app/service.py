@@ -25,7 +25,7 @@ from collections.abc import Callable
 from typing import Any
 
 from vibsynth.control import adapter_modules
-from vibsynth.control.controller import Controller, KnobLimits
+from vibsynth.control.controller import Controller
 from vibsynth.dsp.basis import Basis
 from vibsynth.engine.actuator import ActuatorResponse
 from vibsynth.engine.bank import BankSpec, load_or_build
@@ -35,9 +35,9 @@ from vibsynth.engine.outputs import NullOutput, OutputBackend, SoundDeviceOutput
 from vibsynth.engine.supervisor import STREAMING, ExitGuard, hard_exit
 from vibsynth.errors import ConfigError, DeviceError, ParameterError, VibsynthError
 from vibsynth.settings.actuators import resolve_actuator_response
-from vibsynth.settings.config import settings_of
+from vibsynth.settings.models_config import Audio, VibsynthConfig
 
-__all__ = ["build_engine", "open_output", "serve", "actuator_from_config", "status_line"]
+__all__ = ["build_engine", "open_output", "serve", "actuator_from_settings", "status_line"]
 
 log = logging.getLogger(__name__)
 
@@ -46,20 +46,23 @@ log = logging.getLogger(__name__)
 EXIT_DEADLINE_S = 1.5
 
 
-def actuator_from_config(config: Any) -> ActuatorResponse:
+def actuator_from_settings(settings: VibsynthConfig) -> ActuatorResponse:
     """The actuator response to equalise for (explicit points, else the profile, else flat)."""
-    points = resolve_actuator_response(config)
-    return ActuatorResponse.from_points(points, max_boost_db=settings_of(config).actuator.max_boost_db)
+    points = resolve_actuator_response(settings)
+    return ActuatorResponse.from_points(points, max_boost_db=settings.actuator.max_boost_db)
 
 
 def build_engine(
-    config: Any, basis: Basis | None = None, *, progress: Callable[[float, str], None] | None = None
+    settings: VibsynthConfig, basis: Basis | None = None, *, progress: Callable[[float, str], None] | None = None
 ) -> Engine:
-    """Build (or load from the cache) the bank and an engine from the effective config.
+    """Build (or load from the cache) the bank and an engine from the typed settings.
+
+    The bank takes ``bank:`` (at ``audio.rate``, equalised for ``actuator:``), the engine
+    ``knobs:`` and ``audio:`` (:meth:`Engine.from_settings`).
 
     Parameters
     ----------
-    config : Config
+    settings : VibsynthConfig
     basis : Basis, optional
         Default: the shipped basis.
     progress : callable, optional
@@ -74,21 +77,11 @@ def build_engine(
         from vibsynth.formats.basis_file import default_basis
 
         basis = default_basis()
-    settings = settings_of(config)
-    audio, bank_cfg, knobs = settings.audio, settings.bank, settings.knobs
     try:
-        spec = BankSpec(
-            fs=float(audio.rate),
-            loop_seconds=bank_cfg.loop_seconds,
-            balance_min=bank_cfg.balance_min,
-            balance_max=bank_cfg.balance_max,
-            levels=bank_cfg.levels,
-            seed=bank_cfg.seed,
-            actuator=actuator_from_config(config),
-        )
+        spec = BankSpec.from_settings(settings.bank, settings.audio.rate, actuator_from_settings(settings))
     except (ParameterError, TypeError, ValueError) as exc:
         raise ConfigError(f"bank/audio settings: {exc}") from None
-    cache_dir = bank_cfg.cache_dir
+    cache_dir = settings.bank.cache_dir
     started = time.perf_counter()
     bank, origin = load_or_build(basis, spec, cache_dir=cache_dir, progress=progress)
     log.info(
@@ -99,41 +92,27 @@ def build_engine(
         bank.n_samples / bank.fs,
         bank.fs,
     )
-    block = audio.block_size
     try:
-        return Engine(
-            bank,
-            channels=audio.channels,
-            ceiling_db=knobs.ceiling_db,
-            range_db=knobs.range_db,
-            glide_s=knobs.glide_ms / 1000.0,
-            mute_fade_s=knobs.mute_fade_ms / 1000.0,
-            limiter_ceiling=knobs.limiter_ceiling,
-            initial_intensity=knobs.initial_intensity,
-            initial_balance=knobs.initial_balance,
-            schedule_capacity=knobs.schedule_capacity,
-            max_block=block if 0 < block < bank.n_samples else 1024,
-        )
+        return Engine.from_settings(bank, settings.knobs, settings.audio)
     except ParameterError as exc:
         raise ConfigError(f"engine settings: {exc}") from None
 
 
 def open_output(
-    config: Any,
+    audio: Audio,
     engine: Engine,
     explicit_device: bool,
     *,
     wav_path: str | None = None,
     seconds: float | None = None,
 ) -> OutputBackend:
-    """Create (and for sounddevice, open) the configured output.
+    """Create (and for sounddevice, open) the output of the typed ``audio:`` section.
 
     ``audio.backend = auto`` tries PortAudio and falls back to :class:`NullOutput`
     with a one-line warning when PortAudio is missing or no device can be opened,
     unless ``explicit_device`` (the user named a device or the sounddevice
     backend): then the :class:`DeviceError` propagates.
     """
-    audio = settings_of(config).audio
     backend = audio.backend
     block = audio.block_size
     if backend == "null":
@@ -181,30 +160,30 @@ def status_line(engine: Engine, output: OutputBackend) -> str:
     )
 
 
-def _load_presets(config: Any) -> tuple[Any, Any]:
+def _load_presets(settings: VibsynthConfig) -> tuple[Any, Any]:
     """(library, PresetWatcher class), or (None, None) when the preset folders cannot be read."""
     from vibsynth.settings.library import load_library
     from vibsynth.settings.reload import PresetWatcher
 
     try:
-        return load_library(config), PresetWatcher
+        return load_library(settings), PresetWatcher
     except VibsynthError as exc:
         log.warning("presets could not be loaded (%s); serving without them", exc)
         return None, None
 
 
-def _studio(config: Any, args: Any, controller: Controller, library: Any, servers: list[Any]) -> Any:
+def _studio(settings: VibsynthConfig, args: Any, controller: Controller, library: Any, servers: list[Any]) -> Any:
     """Start the studio (after the other adapters: it shows their status); None when disabled."""
     from vibsynth.app.studio_tabs import studio_extensions
     from vibsynth.control.studio import adapter as studio_adapter
 
     studio = studio_adapter.create(
-        config,
+        settings,
         args,
         controller,
         library,
         servers=list(servers),
-        extensions=studio_extensions(config, controller, library),
+        extensions=studio_extensions(settings, controller, library),
     )
     if studio is not None:
         studio.start()
@@ -222,7 +201,7 @@ def _announce_studio(studio: Any, args: Any, out: Any) -> None:
         print(f"vibsynth: {open_in_browser(studio.url + getattr(args, 'open_fragment', ''))}", file=out, flush=True)
 
 
-def serve(config: Any, args: Any, *, owns_process: bool = False) -> int:
+def serve(settings: VibsynthConfig, args: Any, *, owns_process: bool = False) -> int:
     """Run the service until Ctrl-C/SIGTERM (or ``args.seconds``). Returns the exit code.
 
     ``args`` attributes used: ``preset``, ``balance``, ``intensity``, ``device``,
@@ -230,6 +209,9 @@ def serve(config: Any, args: Any, *, owns_process: bool = False) -> int:
 
     Parameters
     ----------
+    settings : VibsynthConfig
+        The typed settings, built once by the caller (:func:`~vibsynth.settings.config.settings_from_args`);
+        each part gets its own sections of it, nothing validates it again.
     owns_process : bool
         True when the service is the process (the CLI): a signal then arms an
         :class:`ExitGuard` (``os._exit(0)`` after :data:`EXIT_DEADLINE_S` if clean-up
@@ -249,17 +231,15 @@ def serve(config: Any, args: Any, *, owns_process: bool = False) -> int:
         for sig in (signal.SIGTERM, signal.SIGINT):
             previous[sig] = signal.signal(sig, on_signal)
     try:
-        return _serve(config, args, stop, owns_process)
+        return _serve(settings, args, stop, owns_process)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
 
 
-def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) -> int:
+def _serve(settings: VibsynthConfig, args: Any, stop: threading.Event, owns_process: bool) -> int:
     err = sys.stderr
-    settings = settings_of(config)
     knobs = settings.knobs
-    limits = KnobLimits(balance_min=knobs.balance_min, balance_max=knobs.balance_max)
     intensity, balance = getattr(args, "intensity", None), getattr(args, "balance", None)
     # Validate the command line before the (possibly slow) bank build.
     from vibsynth.control.controller import check_range
@@ -267,7 +247,7 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
     if intensity is not None:
         check_range("--intensity", intensity, 0.0, 1.0)
     if balance is not None:
-        check_range("--balance", balance, limits.balance_min, limits.balance_max)
+        check_range("--balance", balance, knobs.balance_min, knobs.balance_max)
 
     def progress(fraction: float, message: str) -> None:
         if err.isatty():
@@ -276,20 +256,15 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
             )
 
     started = time.perf_counter()
-    engine = build_engine(config, progress=progress)
+    engine = build_engine(settings, progress=progress)
     if err.isatty():
         print("\r\x1b[K", end="", file=err)
     log.info("engine ready in %.2f s", time.perf_counter() - started)
     if stop.is_set():
         return 0
 
-    library, watcher_cls = _load_presets(config)
-    controller = Controller(
-        engine,
-        limits=limits,
-        preset_resolver=library.get if library is not None else None,
-        initial_glide_s=knobs.glide_ms / 1000.0,
-    )
+    library, watcher_cls = _load_presets(settings)
+    controller = Controller.for_knobs(engine, knobs, preset_resolver=library.get if library is not None else None)
     for name, value in (("balance", knobs.initial_balance), ("intensity", knobs.initial_intensity)):
         if value:
             controller.set_knob(name, float(value), glide_s=0.0, source="config")
@@ -306,7 +281,7 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
         or settings.audio.device is not None
     )
     output = open_output(
-        config, engine, explicit, wav_path=getattr(args, "wav", None), seconds=getattr(args, "seconds", None)
+        settings.audio, engine, explicit, wav_path=getattr(args, "wav", None), seconds=getattr(args, "seconds", None)
     )
     # The control adapters' /status reads output.state / output.state_reason through this.
     controller.output = output  # type: ignore[attr-defined]
@@ -316,11 +291,11 @@ def _serve(config: Any, args: Any, stop: threading.Event, owns_process: bool) ->
     portaudio_clean = True
     try:
         for module in adapter_modules():
-            server = module.create(config, args, controller, library)
+            server = module.create(settings, args, controller, library)
             if server is not None:
                 server.start()
                 servers.append(server)
-        studio = _studio(config, args, controller, library, servers)
+        studio = _studio(settings, args, controller, library, servers)
         if library is not None and watcher_cls is not None and settings.presets.watch:
             watcher = watcher_cls(library, on_change=lambda name: controller.reapply_preset(name), interval_s=0.5)
             watcher.start()

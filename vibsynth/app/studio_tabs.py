@@ -1,9 +1,11 @@
 """The studio's extension tabs: the parts of ``vibsynth/app`` that add a tab to the studio.
 
 Each module named in :data:`STUDIO_EXTENSION_MODULES` defines
-``studio_extension(config, controller, library) -> StudioExtension | None`` (None: nothing to
-add, e.g. disabled by the config). The lab (issue 17) and the clip lane (issue 16) add
-their module here, one line each; docs/studio.md, "Extensions", describes the contract.
+``studio_extension(settings, controller, library) -> StudioExtension | None`` (None: nothing
+to add, e.g. disabled by the config), ``settings`` being the typed
+:class:`~vibsynth.settings.models_config.VibsynthConfig` (each tab reads its own sections).
+The lab (issue 17) and the clip lane (issue 16) add their module here, one line each;
+docs/studio.md, "Extensions", describes the contract.
 """
 
 from __future__ import annotations
@@ -13,17 +15,18 @@ import logging
 from typing import Any
 
 from vibsynth.control.studio.extension import StudioExtension
+from vibsynth.settings.models_config import VibsynthConfig
 
 __all__ = ["STUDIO_EXTENSION_MODULES", "studio_extensions"]
 
 log = logging.getLogger(__name__)
 
-#: Modules providing ``studio_extension(config, controller, library)``, in tab order.
+#: Modules providing ``studio_extension(settings, controller, library)``, in tab order.
 STUDIO_EXTENSION_MODULES: tuple[str, ...] = ("vibsynth.app.lab.studio", "vibsynth.app.clips.studio")
 
 
 def studio_extensions(
-    config: Any, controller: Any, library: Any, modules: tuple[str, ...] | None = None
+    settings: VibsynthConfig, controller: Any, library: Any, modules: tuple[str, ...] | None = None
 ) -> list[StudioExtension]:
     """The extensions the studio shows (modules missing from this installation are skipped)."""
     out = []
@@ -34,7 +37,7 @@ def studio_extensions(
             if exc.name != name:
                 raise
             continue
-        extension = module.studio_extension(config, controller, library)
+        extension = module.studio_extension(settings, controller, library)
         if extension is not None:
             out.append(extension)
     return out

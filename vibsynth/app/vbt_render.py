@@ -160,7 +160,7 @@ def prepare(
     }
     ov.update(overrides or {})
     config = load_config(config_path, overrides=ov, user_file=False)
-    engine = build_engine(config, basis=basis)
+    engine = build_engine(config.settings, basis=basis)
     bank = engine.bank
     balances = np.asarray(basis.balance_from_t1(trajectory.t1), dtype=np.float64)
     clamped = int(np.count_nonzero(loud & ((balances < bank.balances[0]) | (balances > bank.balances[-1]))))

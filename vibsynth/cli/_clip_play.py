@@ -109,7 +109,7 @@ def _prefix() -> str:
     try:
         from vibsynth.settings.config import load_config
 
-        prefix = str(load_config().data.get("osc", {}).get("prefix") or "/vibsynth")
+        prefix = load_config().settings.osc.prefix
     except Exception:  # noqa: BLE001 - a broken config must not stop a client from reaching the server
         prefix = "/vibsynth"
     return prefix.rstrip("/")

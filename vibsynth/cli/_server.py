@@ -41,11 +41,12 @@ def server_address(args: argparse.Namespace) -> tuple[str, int]:
         try:
             from vibsynth.settings.config import load_config
 
-            section = load_config().data.get("osc", {})
+            osc = load_config().settings.osc
+            configured: tuple[str, int] = (osc.host, osc.port)
         except Exception:  # noqa: BLE001 - a broken config must not stop a client from reaching the server
-            section = {}
-        host = host or section.get("host") or DEFAULT_HOST
-        port = port if port is not None else int(section.get("port") or DEFAULT_PORT)
+            configured = (DEFAULT_HOST, DEFAULT_PORT)
+        host = host or configured[0] or DEFAULT_HOST
+        port = port if port is not None else configured[1] or DEFAULT_PORT
     if host in ("0.0.0.0", "::"):
         host = DEFAULT_HOST  # a server listening everywhere is reached on this machine
     if not 1 <= port <= 65535:

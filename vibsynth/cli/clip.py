@@ -19,7 +19,8 @@ from vibsynth.errors import ClipError, ParameterError
 from vibsynth.formats.haptic_design import HapticDesign
 from vibsynth.settings.clip_convert import ClipMapping, clip_from_design, clip_name, design_from_clip
 from vibsynth.settings.clips import Clip, ClipLibrary, UnknownClipError, clip_to_yaml, load_clip, load_clip_library
-from vibsynth.settings.config import Config, add_config_arguments, config_from_args
+from vibsynth.settings.config import add_config_arguments, settings_from_args
+from vibsynth.settings.models_config import VibsynthConfig
 
 __all__ = ["ORDER", "register", "IMPORTERS"]
 
@@ -45,9 +46,9 @@ IMPORTERS = {"ahap": _read_ahap, "haptic": _read_haptic}
 
 
 # --------------------------------------------------------------------------- helpers
-def _library(args: argparse.Namespace) -> tuple[Config, ClipLibrary]:
-    config = config_from_args(args)
-    return config, load_clip_library(config)  # the library warns once about each broken file
+def _library(args: argparse.Namespace) -> tuple[VibsynthConfig, ClipLibrary]:
+    settings = settings_from_args(args)
+    return settings, load_clip_library(settings)  # the library warns once about each broken file
 
 
 def _get(library: ClipLibrary, name: str) -> Clip:
@@ -135,13 +136,13 @@ def _kind(path: Path, given: str | None) -> str:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    config, library = _library(args)
+    settings, library = _library(args)
     path: Path = args.file
     design = IMPORTERS[_kind(path, args.source)](path)
     if design.ignored:
         print(f"vibsynth: warning: {path}: ignored: {'; '.join(design.ignored)}", file=sys.stderr)
     name = args.name or clip_name(path.stem)
-    clip = clip_from_design(design, name, ClipMapping.from_config(config))
+    clip = clip_from_design(design, name, ClipMapping.from_settings(settings))
     if args.output is not None:
         from vibsynth.settings.clips import save_clip
 
@@ -181,9 +182,9 @@ EXPORTERS = {"ahap": (_ahap_text, "AHAP"), "haptic": (_haptic_text, "Meta .hapti
 def cmd_export(args: argparse.Namespace) -> int:
     from vibsynth.formats.files import atomic_write
 
-    config, library = _library(args)
+    settings, library = _library(args)
     clip = _clip_for_export(library, args.name)
-    design = design_from_clip(clip, ClipMapping.from_config(config))
+    design = design_from_clip(clip, ClipMapping.from_settings(settings))
     to_text, label = EXPORTERS[args.format]
     text = to_text(design, clip)
     if args.output is not None and str(args.output) == "-":

@@ -61,9 +61,10 @@ def cmd_show(args: argparse.Namespace) -> int:
     for key, value, source in rows:
         print(f"{key:<{width_key}}  {value:<{width_val}}  # {source}")
     print(f"\nfiles read (lowest first): {', '.join(config.files)}", file=sys.stderr)
-    if config.get("actuator.profile") and config.get("actuator.response") is None:
-        points = resolve_actuator_response(config)
-        print(f"actuator profile {config.get('actuator.profile')!r}: {len(points)} response points", file=sys.stderr)
+    actuator = config.settings.actuator
+    if actuator.profile and actuator.response is None:
+        points = resolve_actuator_response(config.settings)
+        print(f"actuator profile {actuator.profile!r}: {len(points)} response points", file=sys.stderr)
     return 0
 
 

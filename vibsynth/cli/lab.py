@@ -115,11 +115,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 # --------------------------------------------------------------------------- helpers
 def _root(args: argparse.Namespace) -> Path:
     from vibsynth.research.lab.session import sessions_root
-    from vibsynth.settings.config import config_from_args
+    from vibsynth.settings.config import settings_from_args
 
     if getattr(args, "folder", None):
         return Path(args.folder).expanduser()
-    return sessions_root(config_from_args(args).section("lab"))
+    return sessions_root(settings_from_args(args).lab)
 
 
 def _open_sessions(args: argparse.Namespace) -> list[Any]:
@@ -190,12 +190,12 @@ def run_plan(args: argparse.Namespace) -> int:
     from vibsynth.research.lab.orders import make_plan
     from vibsynth.research.lab.protocol import LabParameters
     from vibsynth.research.lab.stimuli import REFERENCE_RATE_HZ, load_set
-    from vibsynth.settings.config import config_from_args
+    from vibsynth.settings.config import settings_from_args
     from vibsynth.settings.library import load_library
 
-    config = config_from_args(args)
-    params = LabParameters.from_settings(config.section("lab"), familiarisation_pairs=args.familiarisation)
-    library = load_library(config)
+    settings = settings_from_args(args)
+    params = LabParameters.from_settings(settings.lab, familiarisation_pairs=args.familiarisation)
+    library = load_library(settings)
     stimuli = load_set(
         args.stimuli,
         presets=library.presets,

@@ -81,7 +81,7 @@ def run_presets(args: argparse.Namespace) -> int:
     from vibsynth.settings.config import load_config
     from vibsynth.settings.library import load_library
 
-    library = load_library(load_config(args.config) if args.config else load_config())
+    library = load_library(load_config(args.config).settings)
     items = []
     for name in library.names():
         preset = library.get(name)

@@ -21,9 +21,10 @@ from vibsynth.cli._inputs import wav_channel
 from vibsynth.cli._table import Column, add_format_argument, emit, output_format
 from vibsynth.errors import ParameterError, PresetError
 from vibsynth.settings.cli_args import flag_type
-from vibsynth.settings.config import Config, add_config_arguments, config_from_args
+from vibsynth.settings.config import add_config_arguments, settings_from_args
 from vibsynth.settings.library import PresetLibrary, UnknownPresetError, load_library
 from vibsynth.settings.models import PresetModel
+from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.presets import Preset, preset_to_yaml
 
 __all__ = ["ORDER", "register"]
@@ -51,9 +52,9 @@ def _tags(text: str) -> list[str]:
 
 
 # --------------------------------------------------------------------------- helpers
-def _library(args: argparse.Namespace) -> tuple[Config, PresetLibrary]:
-    config = config_from_args(args)
-    return config, load_library(config)  # the library warns once about each broken file
+def _library(args: argparse.Namespace) -> tuple[VibsynthConfig, PresetLibrary]:
+    settings = settings_from_args(args)
+    return settings, load_library(settings)  # the library warns once about each broken file
 
 
 def _get(library: PresetLibrary, name: str) -> Preset:
@@ -221,13 +222,13 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
     from vibsynth.formats.basis_file import default_basis, load_basis
     from vibsynth.formats.recordings import read_recording
 
-    config, library = _library(args)
+    settings, library = _library(args)
     recording = read_recording(args.file, fs=args.rate, channel=args.channel)
     basis = load_basis(args.basis) if args.basis else default_basis()
-    knobs = config.section("knobs")
+    knobs = settings.knobs
     try:
         result = analyze(
-            recording.samples, fs=recording.fs, basis=basis, ceiling_db=knobs["ceiling_db"], range_db=knobs["range_db"]
+            recording.samples, fs=recording.fs, basis=basis, ceiling_db=knobs.ceiling_db, range_db=knobs.range_db
         )
     except ParameterError as exc:
         raise PresetError(f"{recording.path}: {exc}") from None
@@ -240,8 +241,8 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
             recording=recording.path.name,
             digest=recording_digest(recording.path.read_bytes()),
             basis_id=basis.id,
-            ceiling_db=knobs["ceiling_db"],
-            range_db=knobs["range_db"],
+            ceiling_db=knobs.ceiling_db,
+            range_db=knobs.range_db,
             created_by="preset from-recording",
             description=args.description,
             glide_ms=args.glide_ms,
@@ -263,20 +264,14 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
     return 0
 
 
-def _preset_engine(config: Config, library: PresetLibrary, name: str) -> Any:
+def _preset_engine(settings: VibsynthConfig, library: PresetLibrary, name: str) -> Any:
     """An engine (``vibsynth.app.service.build_engine``) with the preset loaded at frame 0."""
     from vibsynth.app.service import build_engine
-    from vibsynth.control.controller import Controller, KnobLimits
+    from vibsynth.control.controller import Controller
 
     preset = _get(library, name)
-    engine = build_engine(config)
-    knobs = config.section("knobs")
-    controller = Controller(
-        engine,
-        limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),
-        preset_resolver=library.get,
-        initial_glide_s=knobs["glide_ms"] / 1000.0,
-    )
+    engine = build_engine(settings)
+    controller = Controller.for_knobs(engine, settings.knobs, preset_resolver=library.get)
     controller.load_preset(preset.name, source="cli")
     return engine
 
@@ -292,8 +287,8 @@ def cmd_play(args: argparse.Namespace) -> int:
     device: Any = args.device
     if isinstance(device, str) and device.isdigit():
         device = int(device)
-    config = config_from_args(args, extra={"audio.channels": args.channels, "audio.device": device})
-    library = load_library(config)
+    settings = settings_from_args(args, extra={"audio.channels": args.channels, "audio.device": device})
+    library = load_library(settings)
     preset = _get(library, args.name)
     if args.output is not None:
         from vibsynth.app.render import render
@@ -301,10 +296,10 @@ def cmd_play(args: argparse.Namespace) -> int:
 
         try:
             check_target(args.output)
-            engine = _preset_engine(config, library, preset.name)
+            engine = _preset_engine(settings, library, preset.name)
             total = int(round(args.seconds * engine.fs))
             with WavStreamWriter(args.output, engine.fs, engine.channels, sample_format=args.format, frames=total) as w:
-                result = render(engine, total, w, block=int(config.get("audio.block_size")))
+                result = render(engine, total, w, block=settings.audio.block_size)
         except OSError as exc:  # missing folder, a folder, permission: one line, exit 1
             print(f"vibsynth: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
             return 1
@@ -316,24 +311,18 @@ def cmd_play(args: argparse.Namespace) -> int:
     import time
 
     from vibsynth.app.service import build_engine, open_output
-    from vibsynth.control.controller import Controller, KnobLimits
+    from vibsynth.control.controller import Controller
 
-    engine = build_engine(config)
-    knobs = config.section("knobs")
-    controller = Controller(
-        engine,
-        limits=KnobLimits(knobs["balance_min"], knobs["balance_max"]),
-        preset_resolver=library.get,
-        initial_glide_s=knobs["glide_ms"] / 1000.0,
-    )
-    output = open_output(config, engine, args.device is not None)
+    engine = build_engine(settings)
+    controller = Controller.for_knobs(engine, settings.knobs, preset_resolver=library.get)
+    output = open_output(settings.audio, engine, args.device is not None)
     output.start()
     try:
         controller.load_preset(preset.name, source="cli")
         print(f"playing {preset.name} for {args.seconds:g} s on {output.describe()} (Ctrl-C stops)", file=sys.stderr)
         time.sleep(args.seconds)
         controller.panic(source="cli")
-        time.sleep(max(0.05, 2 * knobs["mute_fade_ms"] / 1000.0))
+        time.sleep(max(0.05, 2 * settings.knobs.mute_fade_ms / 1000.0))
     finally:
         output.stop()
     return 0

@@ -109,12 +109,12 @@ def _render_midi(args: argparse.Namespace) -> RenderResult:
     from vibsynth.settings.config import load_config
 
     overrides = {"audio": {"rate": int(args.rate)}} if args.rate else None
-    config = load_config(args.config, overrides=overrides)
+    settings = load_config(args.config, overrides=overrides).settings
     from vibsynth.settings.library import load_library
 
-    presets = load_library(config)
+    presets = load_library(settings)
     job = prepare_midi_render(
-        args.midi, config=config, basis=basis_from_args(args), seconds=args.seconds, presets=presets
+        args.midi, settings=settings, basis=basis_from_args(args), seconds=args.seconds, presets=presets
     )
     with (
         _writer(args, job.fs, job.engine.channels, job.frames) as wav,
@@ -130,15 +130,15 @@ def _render_clip(args: argparse.Namespace) -> RenderResult:
     from vibsynth.settings.config import load_config
 
     overrides = {"audio": {"rate": int(args.rate)}} if args.rate else None
-    config = load_config(args.config, overrides=overrides)
-    library = load_clip_library(config)
+    settings = load_config(args.config, overrides=overrides).settings
+    library = load_clip_library(settings)
     try:
         clip = library.get(args.clip)
     except UnknownClipError as exc:  # a name typed on the command line: a usage error
         raise ParameterError(str(exc)) from None
     job = prepare_clip_render(
         clip,
-        config=config,
+        settings=settings,
         basis=basis_from_args(args),
         gain=args.gain,
         rate=args.clip_rate,

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING
 
 from vibsynth.cli._common import finite_float, number_in
 from vibsynth.settings.cli_args import flag_choices, flag_type
+
+if TYPE_CHECKING:
+    from vibsynth.settings.models_config import VibsynthConfig
 
 ORDER = 5
 
@@ -83,25 +86,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     studio_adapter.add_arguments(p)
 
 
-def _config(args: argparse.Namespace) -> Any:
+def _settings(args: argparse.Namespace) -> VibsynthConfig:
+    """The typed settings of a ``serve`` (file, environment, ``--set`` and the flags), built once here."""
     extra = {"audio.channels": args.channels, "audio.backend": args.output, "audio.device": args.device}
     extra["layout"] = getattr(args, "layout", None)  # --layout (control/spatial/adapter.py)
     if args.wav and args.output is None:
         extra["audio.backend"] = "wav"
-    from vibsynth.settings.config import config_from_args
+    from vibsynth.settings.config import settings_from_args
 
-    return config_from_args(args, extra=extra)
+    return settings_from_args(args, extra=extra)
 
 
 def run(args: argparse.Namespace) -> int:
     from vibsynth.app.service import serve
 
-    config = _config(args)
+    settings = _settings(args)
     try:
-        if (config.data.get("audio") or {}).get("backend") == "wav":
+        if settings.audio.backend == "wav":
             _check_wav_output(args)
         # The CLI owns the process: SIGTERM/SIGINT exit (code 0) on time even if a device hangs.
-        return serve(config, args, owns_process=True)
+        return serve(settings, args, owns_process=True)
     except OSError as exc:  # the wav output's file: refused at the start, or failed while writing
         where = f"{exc.filename}: " if exc.filename is not None else ""
         print(f"vibsynth: error: {where}{exc.strerror or exc}", file=sys.stderr)

@@ -5,9 +5,12 @@ service calls without knowing the protocol:
 
 ``add_arguments(parser)``
     add its ``vibsynth serve`` flags (e.g. ``--osc-port``) to an argparse parser;
-``create(config, args, controller, presets) -> ControlServer | None``
-    build (not start) its server from the effective config and flags, or return
-    None when it is disabled or unavailable (after logging one line saying why).
+``create(settings, args, controller, presets) -> ControlServer | None``
+    build (not start) its server from the typed settings (a
+    :class:`~vibsynth.settings.models_config.VibsynthConfig`, built once by the command
+    line; the adapter reads its own sections and hands on typed sections, never the
+    dict form) and flags, or return None when it is disabled or unavailable (after
+    logging one line saying why).
 
 A :class:`ControlServer` has ``name``, ``start()``, ``stop()`` and ``describe()``
 (one line for the start-up banner, e.g. ``OSC on udp://127.0.0.1:9570``).

@@ -33,7 +33,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from vibsynth.control.tap import InputTap
 from vibsynth.engine.commands import (
@@ -49,6 +49,9 @@ from vibsynth.engine.commands import (
 )
 from vibsynth.errors import ParameterError, PresetError
 from vibsynth.settings.models import bounds_of, default_of
+
+if TYPE_CHECKING:
+    from vibsynth.settings.models_config import Knobs
 
 __all__ = [
     "EngineLike",
@@ -209,6 +212,18 @@ class Controller:
         self.started_at = time.monotonic()
         self.error_counts: dict[str, int] = {}
         self.tap = InputTap()  # what the adapters receive, for monitors and status (control/tap.py)
+
+    @classmethod
+    def for_knobs(
+        cls, engine: EngineLike, knobs: Knobs, *, preset_resolver: Callable[[str], PresetLike] | None = None
+    ) -> Controller:
+        """A controller with the typed ``knobs:`` section's live balance range and glide."""
+        return cls(
+            engine,
+            limits=KnobLimits(balance_min=knobs.balance_min, balance_max=knobs.balance_max),
+            preset_resolver=preset_resolver,
+            initial_glide_s=knobs.glide_ms / 1000.0,
+        )
 
     # ------------------------------------------------------------------ helpers
     @property

@@ -51,7 +51,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,6 +61,9 @@ from vibsynth.dsp.intensity import intensity_response
 from vibsynth.dsp.synthesis import SpectralShaper
 from vibsynth.engine.actuator import ActuatorResponse
 from vibsynth.errors import ParameterError
+
+if TYPE_CHECKING:
+    from vibsynth.settings.models_config import Bank
 
 __all__ = ["BankSpec", "NoiseBank", "build_bank", "load_or_build", "default_cache_dir", "CACHE_FORMAT"]
 
@@ -113,6 +116,19 @@ class BankSpec:
             )
         if int(self.levels) != self.levels or self.levels < 2:
             raise ParameterError(f"bank levels must be an integer >= 2, got {self.levels!r}")
+
+    @classmethod
+    def from_settings(cls, bank: Bank, fs: float, actuator: ActuatorResponse) -> BankSpec:
+        """The spec of the typed ``bank:`` section at sample rate ``fs`` (``audio.rate``), for ``actuator``."""
+        return cls(
+            fs=float(fs),
+            loop_seconds=bank.loop_seconds,
+            balance_min=bank.balance_min,
+            balance_max=bank.balance_max,
+            levels=bank.levels,
+            seed=bank.seed,
+            actuator=actuator,
+        )
 
     @property
     def n_samples(self) -> int:

@@ -63,6 +63,7 @@ commands are taken at the same points whatever the caller's block size).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,6 +72,9 @@ from vibsynth.engine import _core
 from vibsynth.engine.bank import NoiseBank
 from vibsynth.engine.commands import LAYER_NAMES, CancelLayer, Command, Panic, SetGlide, SetKnob, SetLayer, SetMute
 from vibsynth.errors import EngineBusyError, ParameterError, ScheduleFullError
+
+if TYPE_CHECKING:
+    from vibsynth.settings.models_config import Audio, Knobs
 
 __all__ = ["Engine", "EngineStats", "KNOB_FADE_IN", "DEFAULT_SCHEDULE_CAPACITY", "TAP_MAX_FRAMES", "MAX_VOICE_SECONDS"]
 
@@ -246,6 +250,34 @@ class Engine:
         self.stats = EngineStats(self._core)
         # seq of a CMD_VOICE -> (samples, frame before which the audio thread may not have taken it)
         self._voices: dict[int, tuple[NDArray[np.float32], int]] = {}
+
+    @classmethod
+    def from_settings(cls, bank: NoiseBank, knobs: Knobs, audio: Audio) -> Engine:
+        """An engine with the ``knobs:`` section's mapping, smoothing, limiter and initial state.
+
+        Parameters
+        ----------
+        bank : NoiseBank
+        knobs : Knobs
+            The typed ``knobs:`` section.
+        audio : Audio
+            The typed ``audio:`` section: ``channels`` outputs, blocks of up to ``block_size``
+            frames (1024 when the bank's loop is shorter than a block).
+        """
+        block = audio.block_size
+        return cls(
+            bank,
+            channels=audio.channels,
+            ceiling_db=knobs.ceiling_db,
+            range_db=knobs.range_db,
+            glide_s=knobs.glide_ms / 1000.0,
+            mute_fade_s=knobs.mute_fade_ms / 1000.0,
+            limiter_ceiling=knobs.limiter_ceiling,
+            initial_intensity=knobs.initial_intensity,
+            initial_balance=knobs.initial_balance,
+            schedule_capacity=knobs.schedule_capacity,
+            max_block=block if 0 < block < bank.n_samples else 1024,
+        )
 
     # ------------------------------------------------------------------ control side
     def submit(self, command: Command) -> int:

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 from vibsynth.errors import ClipError
 from vibsynth.formats.haptic_design import HapticDesign, Segment, Tap
 from vibsynth.settings.clips import Clip, Keyframe, Transient, clip_from_data
-from vibsynth.settings.config import Config
 from vibsynth.settings.models_clip import MAX_KEYFRAMES, MAX_TRANSIENTS
+from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import NAME_PATTERN
 from vibsynth.settings.validation import FixedLocator
 
@@ -58,22 +58,21 @@ class ClipMapping:
     transient_decay_ms: float = 40.0
 
     @classmethod
-    def from_config(cls, config: Config) -> ClipMapping:
-        """The ``clips:`` settings of a config; null balance ends are the live range ``knobs.balance_min/max``."""
-        clips, knobs = config.section("clips"), config.section("knobs")
-        low = clips["sharpness_0_balance"]
-        high = clips["sharpness_1_balance"]
+    def from_settings(cls, settings: VibsynthConfig) -> ClipMapping:
+        """The ``clips:`` settings; null balance ends are the live range ``knobs.balance_min/max``."""
+        clips, knobs = settings.clips, settings.knobs
+        low, high = clips.sharpness_0_balance, clips.sharpness_1_balance
         points = (
-            float(knobs["balance_min"] if low is None else low),
-            float(clips["sharpness_half_balance"]),
-            float(knobs["balance_max"] if high is None else high),
+            float(knobs.balance_min if low is None else low),
+            float(clips.sharpness_half_balance),
+            float(knobs.balance_max if high is None else high),
         )
         if not points[0] < points[1] < points[2]:
             raise ClipError(
                 f"clip mapping: balances {points[0]:g} < {points[1]:g} < {points[2]:g} at sharpness 0, 0.5, 1 "
                 "must increase (clips.sharpness_*_balance, knobs.balance_min/max)"
             )
-        return cls(float(clips["intensity_exponent"]), points, float(clips["transient_decay_ms"]))
+        return cls(float(clips.intensity_exponent), points, float(clips.transient_decay_ms))
 
     @property
     def linear(self) -> bool:

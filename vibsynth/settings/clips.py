@@ -36,10 +36,10 @@ import numpy.typing as npt
 
 from vibsynth.errors import ClipError
 from vibsynth.formats.files import MAX_YAML_BYTES
-from vibsynth.settings.config import Config
 from vibsynth.settings.fields import show
 from vibsynth.settings.library import FileLibrary, LibraryKind, shipped_dir, user_dir_of
 from vibsynth.settings.models_clip import CLIP_VERSION, ClipModel
+from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.reload import LibraryWatcher
 from vibsynth.settings.validation import InvalidClipError, model_spec, validate
 from vibsynth.settings.yamldoc import (
@@ -421,6 +421,6 @@ class ClipLibrary(FileLibrary[Clip]):
 ClipWatcher = LibraryWatcher
 
 
-def load_clip_library(config: Config | None = None) -> ClipLibrary:
-    """The clip library for a config: shipped clips + ``clips.user_dir`` (or the platform folder's ``clips/``)."""
-    return ClipLibrary(shipped_clips_dir(), user_dir_of(config, CLIPS))
+def load_clip_library(settings: VibsynthConfig | None = None) -> ClipLibrary:
+    """The clip library for the settings: shipped clips + ``clips.user_dir`` (or the platform folder's ``clips/``)."""
+    return ClipLibrary(shipped_clips_dir(), user_dir_of(settings, CLIPS))

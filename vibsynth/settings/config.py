@@ -23,11 +23,14 @@ and every problem found, structured, in ``.problems``.
 API contract used by the rest of the package:
 
 * ``load_config(path=None, *, overrides=None) -> Config``
-* ``Config.settings``: the typed, validated model (new code reads this)
-* ``Config.data``: nested plain dict with every key of ``vibsynth/data/config/default.yaml``
-* ``Config.section(name) -> dict``; ``Config.get("audio.rate")``
-* ``Config.sources``: dotted key -> where its value came from
-* ``settings_of(config)``: the typed model of a ``Config`` or of anything with a ``.data`` dict
+* ``settings_from_args(args, extra=...)`` / ``Config.settings``: the typed, validated model,
+  built once at the edge (file, environment, flags). It is the one form the program passes
+  on: each part takes its own typed section (``settings.knobs``, ``settings.midi``...).
+* ``Config.data``: nested plain dict with every key of ``vibsynth/data/config/default.yaml``,
+  with ``Config.section(name) -> dict``, ``Config.get("audio.rate")`` and ``Config.sources``
+  (dotted key -> where its value came from): for reading and writing YAML and for
+  ``vibsynth config`` only (``tests/test_settings_form.py`` keeps them inside ``settings/``).
+* ``settings_of(config)``: the typed model of a plain config dict (``settings/`` and tests)
 """
 
 from __future__ import annotations
@@ -64,6 +67,8 @@ __all__ = [
     "default_config_text",
     "load_config",
     "parse_override",
+    "default_settings",
+    "settings_from_args",
     "settings_of",
     "user_config_file",
 ]
@@ -395,3 +400,16 @@ def config_from_args(args: Any, *, extra: Mapping[str, Any] | None = None) -> Co
         if value is not None:
             overrides[key] = value
     return load_config(getattr(args, "config", None), overrides=overrides or None)
+
+
+def settings_from_args(args: Any, *, extra: Mapping[str, Any] | None = None) -> VibsynthConfig:
+    """The typed settings for parsed arguments, validated once (see :func:`config_from_args`).
+
+    The edge of a command: what it hands on is this model (or sections of it), never the dict.
+    """
+    return config_from_args(args, extra=extra).settings
+
+
+def default_settings() -> VibsynthConfig:
+    """The typed settings of the packaged defaults and the environment (no user config file)."""
+    return load_config(user_file=False).settings

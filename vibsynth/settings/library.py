@@ -25,7 +25,7 @@ from typing import Generic, Protocol, TypeVar
 
 from vibsynth.errors import PresetError, VibsynthError
 from vibsynth.formats.files import size_limit_message
-from vibsynth.settings.config import Config
+from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import NAME_RULE
 from vibsynth.settings.presets import MAX_PRESET_BYTES, NAME_PATTERN, SUFFIX, WHAT, Preset, load_preset, save_preset
 
@@ -561,15 +561,15 @@ class PresetLibrary(FileLibrary[Preset]):
         return self.get(name)
 
 
-def user_dir_of(config: Config | None, kind: LibraryKind[T]) -> Path:
-    """A kind's user folder for a config: ``<section>.user_dir``, or the platform folder."""
-    user_dir = config.section(kind.section).get("user_dir") if config is not None else None
+def user_dir_of(settings: VibsynthConfig | None, kind: LibraryKind[T]) -> Path:
+    """A kind's user folder for the typed settings: ``<section>.user_dir``, or the platform folder."""
+    user_dir = getattr(settings, kind.section).user_dir if settings is not None else None
     return Path(user_dir).expanduser() if user_dir else default_user_dir(kind.folder)
 
 
-def load_library(config: Config | None = None) -> PresetLibrary:
-    """The preset library for a config: shipped presets + ``presets.user_dir`` (or the platform folder)."""
-    return PresetLibrary(shipped_presets_dir(), user_dir_of(config, PRESETS))
+def load_library(settings: VibsynthConfig | None = None) -> PresetLibrary:
+    """The preset library for the settings: shipped presets + ``presets.user_dir`` (or the platform folder)."""
+    return PresetLibrary(shipped_presets_dir(), user_dir_of(settings, PRESETS))
 
 
 def _why(exc: OSError) -> str:

@@ -22,7 +22,9 @@ def lab(tmp_path, controller):
     config = load_config(
         None, overrides={"lab.folder": str(tmp_path / "sessions"), "lab.stimulus_s": 0.5}, user_file=False
     )
-    service = LabService(config, controller, PresetLibrary(shipped_presets_dir(), None))
+    service = LabService(
+        config.settings.lab, config.settings.knobs, controller, PresetLibrary(shipped_presets_dir(), None)
+    )
     ext = StudioExtension(name="lab", title="Lab", script=service_script(), add_routes=service.add_routes)
     server = StudioServer(controller, port=0, extensions=[ext])
     server.start()

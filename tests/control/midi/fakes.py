@@ -2,7 +2,20 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import mido
+
+from vibsynth.control.midi.bindings import MidiSettings
+from vibsynth.settings.typed import settings_of
+
+
+def midi_settings(data: Any, channels: int) -> MidiSettings:
+    """The MIDI settings of a config dict (or typed settings) for ``channels`` actuators, as ``serve`` makes them."""
+    if isinstance(data, dict):  # the config of a rig with that many actuators
+        data = {**data, "audio": {**data.get("audio", {}), "channels": channels}}
+    typed = settings_of(data)
+    return MidiSettings.from_settings(typed.midi, channels, fade_ms=typed.knobs.mute_fade_ms)
 
 
 class FakeEngine:

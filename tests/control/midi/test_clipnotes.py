@@ -6,12 +6,11 @@ import mido
 import numpy as np
 import pytest
 
-from tests.control.midi.fakes import LoopPort
+from tests.control.midi.fakes import LoopPort, midi_settings
 from vibsynth.app.midi_render import render_midi_file
 from vibsynth.control import clips
 from vibsynth.control.clips.player import ClipPlayer
 from vibsynth.control.controller import Controller
-from vibsynth.control.midi.bindings import MidiSettings
 from vibsynth.control.midi.clipnotes import ClipNotes
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import MidiServer
@@ -20,7 +19,8 @@ from vibsynth.engine.bank import BankSpec, build_bank
 from vibsynth.engine.engine import Engine
 from vibsynth.formats.basis_file import default_basis
 from vibsynth.settings.clips import ClipLibrary, shipped_clips_dir
-from vibsynth.settings.config import default_config_data, settings_of
+from vibsynth.settings.config import default_config_data
+from vibsynth.settings.typed import settings_of
 
 FS = 8000.0
 BLOCK = 64
@@ -58,7 +58,7 @@ class Rig:
         self.player = ClipPlayer(self.controller, ClipLibrary(shipped_clips_dir(), tmp_path).get, start_margin_frames=0)
         clips.attach(self.controller, self.player)
         self.notes = ClipNotes.from_settings(settings_of(data).midi_clips, self.controller)
-        self.mapper = MidiMapper(self.controller, MidiSettings.from_config(data, 2), clip_notes=self.notes)
+        self.mapper = MidiMapper(self.controller, midi_settings(data, 2), clip_notes=self.notes)
 
     def send(self, *msgs: mido.Message) -> None:
         for msg in msgs:
@@ -200,12 +200,11 @@ def test_render_midi_plays_the_clip_notes_offline(bank, tmp_path):
     path = tmp_path / "pad.mid"
     mid.save(path)
     data = config_data()
-    from types import SimpleNamespace
 
     engine = Engine(bank, channels=2, ceiling_db=-40.0, glide_s=0.02)
     x, fs = render_midi_file(
         path,
-        config=SimpleNamespace(data=data),
+        settings=settings_of(data),
         engine=engine,
         seconds=2.0,
         clips=ClipLibrary(shipped_clips_dir(), tmp_path),

@@ -11,7 +11,7 @@ import mido
 import pytest
 import yaml
 
-from tests.control.midi.fakes import FakeEngine
+from tests.control.midi.fakes import FakeEngine, midi_settings
 from vibsynth.control.controller import Controller
 from vibsynth.control.midi.adapter import learn
 from vibsynth.control.midi.bindings import Binding, MidiSettings, parse_bindings
@@ -68,7 +68,7 @@ def test_save_keeps_comments_and_other_keys(tmp_path):
     }
     # the saved file loads through the normal config path and parses back to the same bindings
     cfg = load_config(path)
-    settings = MidiSettings.from_config(cfg.data, 1)
+    settings = midi_settings(cfg.settings, 1)
     assert [b for b in settings.bindings if b.cc is not None] == bindings
 
 
@@ -87,7 +87,7 @@ def test_nrpn_shorthand_bindings_are_not_copied_into_the_mapping(tmp_path):
     data = yaml.safe_load(path.read_text())
     assert data["midi"]["mapping"] == {"intensity": [{"cc": 11}], "balance": [{"cc": 74}]}
     assert "nrpn" not in data["midi"]  # the default shorthand is left to apply by default
-    reloaded = MidiSettings.from_config(load_config(path, env={}).data, 1).bindings
+    reloaded = midi_settings(load_config(path, env={}).settings, 1).bindings
     assert set(reloaded) == set(shipped) and {b for b in reloaded if b.shorthand} == {
         Binding("intensity", nrpn=128),
         Binding("balance", nrpn=129),
@@ -110,7 +110,7 @@ def test_learning_a_shorthand_nrpn_for_the_other_knob_reloads_as_learned(tmp_pat
     assert data["midi"]["mapping"] == {"intensity": [{"cc": 11}], "balance": [{"nrpn": [1, 0]}, {"cc": 74}]}
     assert data["midi"]["nrpn"] == {"balance": [1, 1]}  # intensity's shorthand gave its NRPN away
     assert "# faders" in text and data["midi"]["mode"] == "continuous"
-    assert set(MidiSettings.from_config(load_config(path, env={}).data, 1).bindings) == live
+    assert set(midi_settings(load_config(path, env={}).settings, 1).bindings) == live
 
 
 def test_save_creates_a_missing_file(tmp_path):
@@ -133,7 +133,7 @@ def test_server_learn_binds_and_saves(tmp_path):
     data = default_config_data()
     data["midi"]["mode"] = "continuous"
     controller = Controller(FakeEngine())
-    mapper = MidiMapper(controller, MidiSettings.from_config(data, 1))
+    mapper = MidiMapper(controller, midi_settings(data, 1))
     server = MidiServer(mapper, port="x", config_path=path)
     saved = threading.Event()
     original = server._save
@@ -163,7 +163,7 @@ def test_server_learn_binds_and_saves(tmp_path):
     cfg = load_config(path, env={})
     assert cfg.get("audio.rate") == 44100 and cfg.get("osc.port") == 9999 and cfg.get("midi.release_ms") == 300.0
     reloaded = Controller(FakeEngine())
-    settings = MidiSettings.from_config(cfg.data, 1)
+    settings = midi_settings(cfg.settings, 1)
     settings = replace(settings, mode="continuous")
     fresh = MidiMapper(reloaded, settings)
     assert fresh.handle(mido.Message("control_change", control=1, value=64))
@@ -201,16 +201,16 @@ def test_serve_learns_into_the_config_file_given_by_flag_or_environment(tmp_path
     args = argparse.Namespace(midi="keys", midi_virtual=False, no_midi=False, learn=None, config=None)
 
     monkeypatch.setenv(CONFIG_ENV_VAR, str(tmp_path / "env.yaml"))
-    server = adapter.create(cfg, args, Controller(FakeEngine()), None)
+    server = adapter.create(cfg.settings, args, Controller(FakeEngine()), None)
     assert server is not None and server.config_path == tmp_path / "env.yaml"
 
     args.config = tmp_path / "flag.yaml"  # --config wins over the environment
-    server = adapter.create(cfg, args, Controller(FakeEngine()), None)
+    server = adapter.create(cfg.settings, args, Controller(FakeEngine()), None)
     assert server is not None and server.config_path == tmp_path / "flag.yaml"
 
     monkeypatch.delenv(CONFIG_ENV_VAR)
     args.config = None
-    server = adapter.create(cfg, args, Controller(FakeEngine()), None)
+    server = adapter.create(cfg.settings, args, Controller(FakeEngine()), None)
     assert server is not None and server.config_path == user_config_file()
 
 

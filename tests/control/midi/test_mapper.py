@@ -8,9 +8,9 @@ import mido
 import numpy as np
 import pytest
 
-from tests.control.midi.fakes import LoopPort
+from tests.control.midi.fakes import LoopPort, midi_settings
 from vibsynth.control.controller import Controller, KnobLimits
-from vibsynth.control.midi.bindings import Binding, MidiSettings, parse_bindings, parse_channel_map, scale_raw
+from vibsynth.control.midi.bindings import Binding, parse_bindings, parse_channel_map, scale_raw
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import MidiServer, resolve_port_name
 from vibsynth.engine.commands import Panic, SetKnob
@@ -69,7 +69,7 @@ def make(channels: int = 1, presets=None, **midi) -> tuple[MidiMapper, Controlle
     engine = FakeEngine(channels)
     resolver = presets.get if presets is not None else None
     controller = Controller(engine, limits=KnobLimits(-3.5, 3.5), preset_resolver=resolver)
-    settings = MidiSettings.from_config(data, channels)
+    settings = midi_settings(data, channels)
     mapper = MidiMapper(controller, settings, presets=presets, clock=lambda: 0.0)
     return mapper, controller, engine, LoopPort()
 
@@ -479,7 +479,7 @@ def test_config_errors_name_the_key():
     data = default_config_data()
     data["midi"]["mode"] = "drone"
     with pytest.raises(ConfigError, match="midi.mode"):
-        MidiSettings.from_config(data, 1)
+        midi_settings(data, 1)
 
 
 def test_channel_map_defaults_and_omni():

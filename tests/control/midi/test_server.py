@@ -8,13 +8,13 @@ import types
 import mido
 import pytest
 
-from tests.control.midi.fakes import FakeEngine
+from tests.control.midi.fakes import FakeEngine, midi_settings
 from vibsynth.control.controller import Controller
 from vibsynth.control.midi import server as midi_server
-from vibsynth.control.midi.bindings import MidiSettings
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import VIRTUAL_PORT_NAME, MidiServer, RtMidiInput, rtmidi_module
 from vibsynth.settings.config import default_config_data
+from vibsynth.settings.typed import settings_of
 
 
 class FakeMidiIn:
@@ -79,7 +79,7 @@ def make_server(**kwargs) -> tuple[MidiServer, Controller]:
     data = default_config_data()
     data["midi"]["mode"] = "continuous"
     controller = Controller(FakeEngine())
-    mapper = MidiMapper(controller, MidiSettings.from_config(data, 1))
+    mapper = MidiMapper(controller, midi_settings(data, 1))
     return MidiServer(mapper, **kwargs), controller
 
 
@@ -208,7 +208,7 @@ def test_a_missing_backend_warning_says_how_to_get_ports(monkeypatch, caplog):
     monkeypatch.setattr(adapter, "port_help", lambda: "HOW-TO-GET-PORTS")
     args = argparse.Namespace(midi=None, midi_virtual=True, no_midi=False, learn=None, config=None)
     with caplog.at_level(logging.WARNING):
-        server = adapter.create(argparse.Namespace(data=default_config_data()), args, make_controller(1), None)
+        server = adapter.create(settings_of(default_config_data()), args, make_controller(1), None)
     assert server is None
     (line,) = [r.getMessage() for r in caplog.records if "running without MIDI" in r.getMessage()]
     assert "/dev/snd/seq" in line and line.endswith("HOW-TO-GET-PORTS")

@@ -582,14 +582,14 @@ def test_add_arguments_and_create():
     parser = argparse.ArgumentParser()
     osc_adapter.add_arguments(parser)
     args = parser.parse_args(["--osc-port", "0", "--osc-host", "127.0.0.1"])
-    server = osc_adapter.create(load_config(), args, make_controller(2), None)
+    server = osc_adapter.create(load_config().settings, args, make_controller(2), None)
     assert server is not None and server.name == "osc"
     server.start()
     try:
         assert server.port > 0 and "udp://127.0.0.1:" in server.describe()
     finally:
         server.stop()
-    assert osc_adapter.create(load_config(), parser.parse_args(["--no-osc"]), make_controller(2), None) is None
+    assert osc_adapter.create(load_config().settings, parser.parse_args(["--no-osc"]), make_controller(2), None) is None
 
 
 @pytest.mark.parametrize(
@@ -602,12 +602,10 @@ def test_add_arguments_and_create():
         {"speed": {"curve": [[5, 0.2], [1, 0.3]]}},
     ],
 )
-def test_create_rejects_bad_config(overrides):
-    config = load_config()
-    for section, values in overrides.items():
-        config.data[section].update(values)
-    with pytest.raises(ConfigError):
-        osc_adapter.create(config, None, make_controller(1), None)
+def test_bad_osc_settings_are_refused_where_the_config_is_loaded(overrides):
+    """The adapter takes the typed settings: a bad value never reaches it (the loader refuses it)."""
+    with pytest.raises(ConfigError, match=r"command line: (osc|speed)\."):
+        load_config(overrides=overrides, env={}, user_file=False)
 
 
 def test_port_in_use_is_a_clear_error():

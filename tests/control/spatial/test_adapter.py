@@ -7,7 +7,7 @@ import argparse
 import pytest
 
 from tests.control.osc.fakes import make_controller
-from vibsynth.cli.serve import _config
+from vibsynth.cli.serve import _settings
 from vibsynth.control import ADAPTER_MODULES, spatial
 from vibsynth.control.spatial import adapter
 from vibsynth.settings.config import ENV_VARS, load_config
@@ -22,7 +22,7 @@ def isolated(tmp_path, monkeypatch):
 
 def test_no_layout_no_mixer():
     config = load_config(env={}, user_file=False)
-    assert adapter.create(config, None, make_controller(channels=2)) is None
+    assert adapter.create(config.settings, None, make_controller(channels=2)) is None
 
 
 def test_the_mixer_takes_the_config(basis):
@@ -37,7 +37,7 @@ def test_the_mixer_takes_the_config(basis):
         user_file=False,
     )
     ctl = make_controller(channels=6)
-    mixer = adapter.create(config, None, ctl)
+    mixer = adapter.create(config.settings, None, ctl)
     assert mixer.layout.name == "glove" and mixer.layout.channels == (0, 1, 2, 3, 4, 5)
     assert mixer.update_s == pytest.approx(0.02) and (mixer.ceiling_db, mixer.range_db) == (-30.0, 50.0)
     defaults = mixer.table.defaults
@@ -58,7 +58,8 @@ def test_serve_has_a_layout_flag_that_sets_the_config():
     adapter.add_arguments(parser)
     args = parser.parse_args(["--layout", "wristband"])
     args.channels, args.output, args.device, args.wav, args.config, args.config_set = 8, "null", None, None, None, []
-    config = _config(args)
-    assert config.settings.layout == "wristband" and config.sources["layout"] == "command line"
+    assert _settings(args).layout == "wristband"
+    args.layout = None
+    assert _settings(args).layout is None  # the flag set it, not a file
     with pytest.raises(SystemExit):
         parser.parse_args(["--layout", "../etc"])

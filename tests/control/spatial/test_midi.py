@@ -27,7 +27,7 @@ def rig(basis):
     mixer = make_mixer(ctl, basis, clock=Clock())
     config = load_config(overrides=CONFIG, env={}, user_file=False)
     mapper = MidiMapper(ctl, MidiSettings(mode="continuous", bindings=parse_bindings({"balance": [{"cc": 74}]})))
-    mapper.positions = PositionControllers.from_config(config, ctl)
+    mapper.positions = PositionControllers.from_settings(config.settings.sources.midi, ctl)
     spatial.attach(ctl, mixer)
     yield ctl, mixer, mapper
     spatial.detach(ctl, mixer)
@@ -82,8 +82,8 @@ def test_learn_does_not_take_a_source_controller(rig):
 def test_without_a_layout_the_moves_are_counted_and_dropped(basis):
     ctl = make_controller(channels=4)
     config = load_config(overrides=CONFIG, env={}, user_file=False)
-    positions = PositionControllers.from_config(config, ctl)
+    positions = PositionControllers.from_settings(config.settings.sources.midi, ctl)
     assert positions.handle(0, 20, 127) is True
     assert positions.refused == 1 and ctl.error_counts == {"midi_no_layout": 1}
     assert positions.handle(0, 99, 127) is False
-    assert PositionControllers.from_config(load_config(env={}, user_file=False), ctl) is None
+    assert PositionControllers.from_settings(load_config(env={}, user_file=False).settings.sources.midi, ctl) is None

@@ -55,7 +55,7 @@ def test_parameters_default_to_the_papers():
 def test_parameters_from_the_config_section_and_overrides():
     from vibsynth.settings.config import load_config
 
-    lab = load_config(None).section("lab")
+    lab = load_config(None).settings.lab
     p = LabParameters.from_settings(lab, familiarisation_pairs=0, gap_s=None)
     assert p == LabParameters(familiarisation_pairs=0)
 

@@ -38,6 +38,7 @@ from vibsynth.formats.jsonio import parse_json
 from vibsynth.formats.meta_haptic import parse_meta_haptic
 from vibsynth.settings.clip_convert import ClipMapping, clip_from_design, clip_name
 from vibsynth.settings.clips import Clip, ClipLibrary, UnknownClipError, clip_from_data, load_clip_library
+from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import NAME_PATTERN
 from vibsynth.settings.validation import FixedLocator
 
@@ -102,16 +103,17 @@ class ClipLane:
 
     Parameters
     ----------
-    config : Config
-        For the import mapping (``clips:``).
+    settings : VibsynthConfig
+        For the import mapping (``clips:`` and the live balance range of ``knobs:``), made at
+        each import: a mapping that does not increase is that request's error.
     controller : Controller
         Its clip player (:func:`~vibsynth.control.clips.player_of`) is looked up at each request.
     library : ClipLibrary
         Shipped + user clips; re-read (only what changed) before each listing and lookup.
     """
 
-    def __init__(self, config: Any, controller: Any, library: ClipLibrary) -> None:
-        self.config = config
+    def __init__(self, settings: VibsynthConfig, controller: Any, library: ClipLibrary) -> None:
+        self.settings = settings
         self.controller = controller
         self.library = library
 
@@ -225,7 +227,7 @@ class ClipLane:
 
         def work() -> dict[str, Any]:
             design = IMPORTERS[suffix](text, filename)
-            clip = clip_from_design(design, clip_name(Path(filename).stem), ClipMapping.from_config(self.config))
+            clip = clip_from_design(design, clip_name(Path(filename).stem), ClipMapping.from_settings(self.settings))
             return {"clip": clip.to_dict(), "ignored": list(design.ignored)}
 
         return web.json_response(await self._blocking(work))
@@ -279,9 +281,9 @@ class ClipLane:
         )
 
 
-def studio_extension(config: Any, controller: Any, library: Any) -> Any:
+def studio_extension(settings: VibsynthConfig, controller: Any, library: Any) -> Any:
     """The clip lane tab (``library`` is the preset library, not used: clips have their own)."""
     from vibsynth.control.studio.extension import StudioExtension
 
-    lane = ClipLane(config, controller, load_clip_library(config))
+    lane = ClipLane(settings, controller, load_clip_library(settings))
     return StudioExtension(name=NAME, title="Clips", script=SCRIPT, add_routes=lane.add_routes)

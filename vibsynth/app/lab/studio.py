@@ -37,6 +37,8 @@ from vibsynth.research.lab.build import SessionRequest, new_session
 from vibsynth.research.lab.protocol import MAX_SEED, PROTOCOLS, LabParameters, check_seed
 from vibsynth.research.lab.session import Session, list_sessions, sessions_root
 from vibsynth.research.lab.stimuli import RENDERS_DEFAULT_COUNT, load_set
+from vibsynth.settings.models_config import Knobs, VibsynthConfig
+from vibsynth.settings.models_lab import Lab
 
 __all__ = ["LabService", "studio_extension", "STATIC"]
 
@@ -72,8 +74,10 @@ class LabService:
 
     Parameters
     ----------
-    config : Config
-        ``lab:`` (sessions folder, protocol defaults) and ``knobs:`` (the level mapping).
+    lab : Lab
+        The typed ``lab:`` section (sessions folder, protocol defaults).
+    knobs : Knobs
+        The typed ``knobs:`` section (the level mapping).
     controller : Controller
         Its engine plays the stimuli.
     library : PresetLibrary or None
@@ -82,11 +86,11 @@ class LabService:
         Default: the shipped basis.
     """
 
-    def __init__(self, config: Any, controller: Any, library: Any, *, basis: Any = None) -> None:
+    def __init__(self, lab: Lab, knobs: Knobs, controller: Any, library: Any, *, basis: Any = None) -> None:
         from vibsynth.formats.basis_file import default_basis
 
-        self.lab = dict(config.section("lab"))
-        self.knobs = dict(config.section("knobs"))
+        self.lab = lab
+        self.knobs = knobs
         self.root = sessions_root(self.lab)
         self.library = library
         self.basis = basis if basis is not None else default_basis()
@@ -166,8 +170,8 @@ class LabService:
                 seconds=p.stimulus_s,
                 seed=seed,
                 basis=self.basis,
-                ceiling_db=float(self.knobs["ceiling_db"]),
-                range_db=float(self.knobs["range_db"]),
+                ceiling_db=self.knobs.ceiling_db,
+                range_db=self.knobs.range_db,
                 render_intensity=p.level,
             )
             session = new_session(
@@ -175,8 +179,8 @@ class LabService:
                 request,
                 stimuli,
                 basis=self.basis,
-                ceiling_db=float(self.knobs["ceiling_db"]),
-                range_db=float(self.knobs["range_db"]),
+                ceiling_db=self.knobs.ceiling_db,
+                range_db=self.knobs.range_db,
             )
             self._preparing = False
             try:
@@ -341,7 +345,7 @@ class LabService:
         return web.Response(text=(STATIC / "lab.css").read_text(encoding="utf-8"), content_type="text/css")
 
 
-def studio_extension(config: Any, controller: Any, library: Any) -> StudioExtension | None:
-    """The Lab tab (``vibsynth/app/studio_tabs.py`` lists this module)."""
-    service = LabService(config, controller, library)
+def studio_extension(settings: VibsynthConfig, controller: Any, library: Any) -> StudioExtension | None:
+    """The Lab tab (``vibsynth/app/studio_tabs.py`` lists this module): ``lab:`` and ``knobs:``."""
+    service = LabService(settings.lab, settings.knobs, controller, library)
     return StudioExtension(name="lab", title="Lab", script=STATIC / "lab_tab.js", add_routes=service.add_routes)

@@ -17,7 +17,7 @@ from vibsynth.control import clips
 from vibsynth.control.clips.player import ClipPlayer
 from vibsynth.control.controller import Controller
 from vibsynth.settings.clips import ClipLibrary, ClipWatcher, load_clip_library
-from vibsynth.settings.config import settings_of
+from vibsynth.settings.models_config import VibsynthConfig
 
 __all__ = ["ClipService", "add_arguments", "create"]
 
@@ -74,13 +74,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The clips add no ``vibsynth serve`` flags (the ``clips:`` and ``midi_clips:`` config sections say it all)."""
 
 
-def create(config: Any, args: argparse.Namespace | None, controller: Controller, presets: Any = None) -> ClipService:
-    """Build (not start) the clip library and player.
-
-    Raises
-    ------
-    ConfigError
-        The ``clips:`` section is invalid.
-    """
-    settings = settings_of(config)
-    return ClipService(controller, load_clip_library(config), watch=settings.clips.watch, prefix=settings.osc.prefix)
+def create(
+    settings: VibsynthConfig, args: argparse.Namespace | None, controller: Controller, presets: Any = None
+) -> ClipService:
+    """Build (not start) the clip library (``clips:``) and player (OSC prefix ``osc.prefix``)."""
+    return ClipService(controller, load_clip_library(settings), watch=settings.clips.watch, prefix=settings.osc.prefix)

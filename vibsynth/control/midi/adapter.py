@@ -18,7 +18,7 @@ from vibsynth.control.midi.server import VIRTUAL_PORT_NAME, MidiServer, _one_lin
 from vibsynth.control.spatial.midi import PositionControllers
 from vibsynth.errors import DeviceError
 from vibsynth.settings.cli_args import flag_type
-from vibsynth.settings.config import settings_of
+from vibsynth.settings.models_config import VibsynthConfig
 
 log = logging.getLogger(__name__)
 
@@ -57,12 +57,15 @@ def list_inputs() -> list[str]:
         return []
 
 
-def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any) -> MidiServer | None:
-    """Build (not start) the MIDI server from config and flags, or None (after one log line).
+def create(settings: VibsynthConfig, args: argparse.Namespace, controller: Any, presets: Any) -> MidiServer | None:
+    """Build (not start) the MIDI server from the typed settings and flags, or None (after one log line).
+
+    The server gets the ``midi:`` section, the clip notes ``midi_clips:``, the position
+    controllers ``sources.midi`` (the mute fade of ``knobs:`` ends notes).
 
     Parameters
     ----------
-    config : vibsynth.settings.config.Config
+    settings : VibsynthConfig
     args : argparse.Namespace
         ``midi``, ``midi_virtual``, ``no_midi``, ``learn`` (absent = defaults); ``config`` (user file).
     controller : Controller
@@ -75,10 +78,9 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
     Raises
     ------
     ConfigError
-        The ``midi:`` section is invalid.
+        A binding to a controller reserved for NRPN/RPN data.
     """
-    data = config.data
-    section = settings_of(config).midi
+    section = settings.midi
     if getattr(args, "no_midi", False) or not section.enabled:
         log.info(
             "running without MIDI: disabled (%s)",
@@ -91,7 +93,7 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
     if port is None and not virtual:
         log.warning("running without MIDI: no input chosen (use --midi NAME|INDEX or --midi-virtual)")
         return None
-    settings = MidiSettings.from_config(data, controller.channels)
+    midi = MidiSettings.from_settings(section, controller.channels, fade_ms=settings.knobs.mute_fade_ms)
     try:
         names = mido.get_input_names()
     except Exception as exc:
@@ -103,9 +105,9 @@ def create(config: Any, args: argparse.Namespace, controller: Any, presets: Any)
         except DeviceError as exc:
             log.warning("running without MIDI: %s. %s", exc, port_help())
             return None
-    clip_notes = ClipNotes.from_settings(settings_of(config).midi_clips, controller)  # notes -> clips
-    mapper = MidiMapper(controller, settings, presets=presets, clip_notes=clip_notes)
-    mapper.positions = PositionControllers.from_config(config, controller)  # sources.midi
+    clip_notes = ClipNotes.from_settings(settings.midi_clips, controller)  # notes -> clips
+    mapper = MidiMapper(controller, midi, presets=presets, clip_notes=clip_notes)
+    mapper.positions = PositionControllers.from_settings(settings.sources.midi, controller)
     server = MidiServer(
         mapper,
         port=port,

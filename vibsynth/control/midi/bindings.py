@@ -5,10 +5,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from vibsynth.errors import ConfigError, ParameterError
 from vibsynth.settings.values import BINDABLE_CC_MAX
+
+if TYPE_CHECKING:
+    from vibsynth.settings.models_config import Midi
 
 KNOBS = ("intensity", "balance")
 
@@ -247,56 +250,27 @@ class MidiSettings:
     fade_s: float = 0.01
 
     @classmethod
-    def from_config(cls, data: Mapping[str, Any], channels: int) -> MidiSettings:
-        """Build from the whole config dict (``config.data``) for an engine with ``channels`` outputs.
+    def from_settings(cls, midi: Midi, channels: int, *, fade_ms: float) -> MidiSettings:
+        """From the typed ``midi:`` section (its model checked the ranges) for an engine with ``channels`` outputs.
 
-        Keys read with defaults when absent: ``midi.attack_ms`` (null),
-        ``midi.nrpn`` (:data:`DEFAULT_NRPN`), ``midi.cc_glide_max_ms`` (100),
-        ``knobs.mute_fade_ms`` (10).
+        ``fade_ms`` is ``knobs.mute_fade_ms``.
 
         Raises
         ------
         ConfigError
+            A binding to a controller reserved for NRPN/RPN data (CC 6, 38, 96-101).
         """
-        midi = dict(data.get("midi") or {})
-        knobs = data.get("knobs") or {}
-        mode = midi.get("mode", "gate")
-        if mode not in ("gate", "continuous"):
-            raise ConfigError(f"midi.mode: expected gate or continuous, got {mode!r}")
-
-        def number(
-            key: str,
-            default: float | None,
-            low: float,
-            high: float,
-            section: Mapping[str, Any] = midi,
-            prefix: str = "midi",
-        ) -> float | None:
-            value = section.get(key, default)
-            if value is None:
-                return None
-            try:
-                num = float(value)
-            except (TypeError, ValueError):
-                raise ConfigError(f"{prefix}.{key}: expected a number, got {value!r}") from None
-            if not (low <= num <= high):
-                raise ConfigError(f"{prefix}.{key}: {num:g} is outside [{low:g}, {high:g}]")
-            return num
-
-        release = number("release_ms", 150.0, 0.0, 10000.0)
-        attack = number("attack_ms", None, 0.0, 10000.0)
-        fade = number("mute_fade_ms", 10.0, 0.0, 1000.0, knobs, "knobs")
         return cls(
-            mode=mode,
-            release_s=(release or 0.0) / 1000.0,
-            attack_s=None if attack is None else attack / 1000.0,
-            velocity_curve=number("velocity_curve", 1.0, 0.05, 20.0),  # type: ignore[arg-type]
-            pitch_bend_range=number("pitch_bend_range", 0.5, 0.0, 100.0),  # type: ignore[arg-type]
-            channel_map=parse_channel_map(midi.get("channel_map", {1: "all"}), channels, mpe=bool(midi.get("mpe"))),
-            mpe=bool(midi.get("mpe", False)),
-            bindings=parse_bindings(midi.get("mapping"), midi.get("nrpn", DEFAULT_NRPN)),
-            cc_glide_max_s=(number("cc_glide_max_ms", 100.0, 0.0, 10000.0) or 0.0) / 1000.0,
-            fade_s=(fade or 0.0) / 1000.0,
+            mode=midi.mode,
+            release_s=midi.release_ms / 1000.0,
+            attack_s=None if midi.attack_ms is None else midi.attack_ms / 1000.0,
+            velocity_curve=midi.velocity_curve,
+            pitch_bend_range=midi.pitch_bend_range,
+            channel_map=parse_channel_map(midi.channel_map, channels, mpe=midi.mpe),
+            mpe=midi.mpe,
+            bindings=parse_bindings(midi.mapping.model_dump(exclude_none=True), midi.nrpn.model_dump()),
+            cc_glide_max_s=midi.cc_glide_max_ms / 1000.0,
+            fade_s=fade_ms / 1000.0,
         )
 
 

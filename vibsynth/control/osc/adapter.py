@@ -10,7 +10,7 @@ from vibsynth.control.controller import Controller
 from vibsynth.control.osc.server import OscServer
 from vibsynth.control.osc.speed import SpeedCurve
 from vibsynth.settings.cli_args import flag_type
-from vibsynth.settings.config import settings_of
+from vibsynth.settings.models_config import VibsynthConfig
 
 log = logging.getLogger(__name__)
 
@@ -36,27 +36,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def create(
-    config: Any, args: argparse.Namespace | None, controller: Controller, presets: Any = None
+    settings: VibsynthConfig, args: argparse.Namespace | None, controller: Controller, presets: Any = None
 ) -> OscServer | None:
-    """Build (not start) the OSC server from the config and flags; None when disabled.
+    """Build (not start) the OSC server from the typed settings and flags; None when disabled.
 
     Parameters
     ----------
-    config : Config
-        Effective configuration (``osc``, ``speed`` and ``audio`` sections are read, checked
-        by :func:`vibsynth.settings.config.settings_of`).
+    settings : VibsynthConfig
+        The typed settings (its ``osc``, ``speed`` and ``audio.block_size`` are read).
     args : argparse.Namespace or None
         Parsed ``vibsynth serve`` flags (``--osc-port``, ``--osc-host``, ``--no-osc``).
     controller : Controller
     presets : object, optional
         The preset library (unused: presets are resolved by the controller).
 
-    Raises
-    ------
-    ConfigError
-        For invalid ``osc``/``speed`` settings.
     """
-    settings = settings_of(config)
     osc, speed = settings.osc, settings.speed
     if getattr(args, "no_osc", False) or not osc.enabled:
         log.info("OSC server disabled (%s)", "--no-osc" if getattr(args, "no_osc", False) else "osc.enabled: false")

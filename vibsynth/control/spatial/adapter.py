@@ -19,9 +19,9 @@ from vibsynth.control.spatial.sources import SourceDefaults, SourceTable
 from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.spatial import TextureSpectra
 from vibsynth.settings.cli_args import flag_type
-from vibsynth.settings.config import settings_of
 from vibsynth.settings.layouts import Layout, resolve_layout
 from vibsynth.settings.models import bounds_of
+from vibsynth.settings.models_config import VibsynthConfig
 
 __all__ = ["add_arguments", "create", "build_mixer"]
 
@@ -41,13 +41,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def build_mixer(
-    config: Any, controller: Controller, layout: Layout, *, basis: Basis | None = None, presets: Any = None
+    settings: VibsynthConfig,
+    controller: Controller,
+    layout: Layout,
+    *,
+    basis: Basis | None = None,
+    presets: Any = None,
 ) -> SourceMixer:
-    """A (not started) mixer for ``layout`` with the config's ``sources``, ``knobs`` and ``speed`` settings.
+    """A (not started) mixer for ``layout`` with the typed ``sources``, ``knobs`` and ``speed`` settings.
 
     Parameters
     ----------
-    config : Config
+    settings : VibsynthConfig
     controller : Controller
     layout : Layout
     basis : Basis, optional
@@ -59,7 +64,6 @@ def build_mixer(
         from vibsynth.formats.basis_file import default_basis
 
         basis = default_basis()
-    settings = settings_of(config)
     sources, knobs, speed = settings.sources, settings.knobs, settings.speed
     limits = controller.limits
     defaults = SourceDefaults(
@@ -85,7 +89,7 @@ def build_mixer(
 
 
 def create(
-    config: Any, args: argparse.Namespace | None, controller: Controller, presets: Any = None
+    settings: VibsynthConfig, args: argparse.Namespace | None, controller: Controller, presets: Any = None
 ) -> SourceMixer | None:
     """Build (not start) the sources' mixer, or None without a layout (after one log line).
 
@@ -94,8 +98,8 @@ def create(
     ConfigError
         The layout names a missing or broken layout file.
     """
-    layout = resolve_layout(config)
+    layout = resolve_layout(settings)
     if layout is None:
         log.info("no layout in the config: touch sources are off (/vibsynth/source/... answers an error)")
         return None
-    return build_mixer(config, controller, layout, presets=presets)
+    return build_mixer(settings, controller, layout, presets=presets)

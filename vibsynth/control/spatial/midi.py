@@ -14,7 +14,6 @@ from typing import Any
 
 from vibsynth.control import spatial
 from vibsynth.control.spatial.sources import SourceTable
-from vibsynth.settings.config import settings_of
 from vibsynth.settings.models_sources import SourceMidi
 
 __all__ = ["AxisBinding", "PositionControllers"]
@@ -60,9 +59,8 @@ class PositionControllers:
                     self._by_cc.setdefault(cc.cc, []).append(binding)
 
     @classmethod
-    def from_config(cls, config: Any, controller: Any) -> PositionControllers | None:
-        """The bindings of ``sources.midi``, or None when there are none."""
-        bindings = settings_of(config).sources.midi
+    def from_settings(cls, bindings: Sequence[SourceMidi], controller: Any) -> PositionControllers | None:
+        """The controllers of the typed ``sources.midi`` list, or None when it is empty."""
         return cls(controller, bindings) if bindings else None
 
     def handle(self, midi_channel: int, cc: int, value: int, at_frame: int | None = None) -> bool:

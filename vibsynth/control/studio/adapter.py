@@ -18,7 +18,7 @@ from vibsynth.control.controller import Controller
 from vibsynth.control.studio.extension import StudioExtension
 from vibsynth.control.studio.security import TOKEN_RULE, check_token
 from vibsynth.settings.cli_args import flag_type
-from vibsynth.settings.config import settings_of
+from vibsynth.settings.models_config import VibsynthConfig
 
 __all__ = ["ENV_TOKEN", "add_arguments", "create", "open_in_browser"]
 
@@ -57,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def create(
-    config: Any,
+    settings: VibsynthConfig,
     args: argparse.Namespace | None,
     controller: Controller,
     library: Any = None,
@@ -69,7 +69,8 @@ def create(
 
     Parameters
     ----------
-    config : Config
+    settings : VibsynthConfig
+        The typed settings; the studio reads its ``studio:`` section.
     args : argparse.Namespace or None
         ``no_studio``, ``studio_port``, ``studio_token`` (absent = defaults).
     controller : Controller
@@ -84,8 +85,8 @@ def create(
     ParameterError
         ``$VIBSYNTH_STUDIO_TOKEN`` is not a valid token.
     """
-    settings = settings_of(config).studio
-    if getattr(args, "no_studio", False) or not settings.enabled:
+    studio = settings.studio
+    if getattr(args, "no_studio", False) or not studio.enabled:
         log.info(
             "studio disabled (%s)", "--no-studio" if getattr(args, "no_studio", False) else "studio.enabled: false"
         )
@@ -100,8 +101,8 @@ def create(
     port_flag = getattr(args, "studio_port", None)
     server = StudioServer(
         controller,
-        host=settings.host,
-        port=port_flag if port_flag is not None else settings.port,
+        host=studio.host,
+        port=port_flag if port_flag is not None else studio.port,
         token=token,
         library=library,
         extensions=extensions,
@@ -109,7 +110,7 @@ def create(
         status_sources=status_sources(servers),
         learn=midi_learn,
     )
-    install_panels(server, config, servers)
+    install_panels(server, servers)
     return server
 
 

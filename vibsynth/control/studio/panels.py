@@ -14,7 +14,7 @@ from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB
 __all__ = ["install_panels"]
 
 
-def install_panels(server: Any, config: Any = None, servers: Sequence[Any] = ()) -> None:
+def install_panels(server: Any, servers: Sequence[Any] = ()) -> None:
     """Add the status, spectrum, presets and recording panels to ``server`` (a StudioServer, not started).
 
     The spectrum uses the shipped basis (the one ``vibsynth serve`` builds its bank from) and

@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from vibsynth.errors import ParameterError
+
+if TYPE_CHECKING:
+    from vibsynth.settings.models_lab import Lab
 
 __all__ = [
     "PROTOCOLS",
@@ -145,23 +147,23 @@ class LabParameters:
             raise ParameterError(f"familiarisation_pairs must be in [0, 1000], got {self.familiarisation_pairs}")
 
     @classmethod
-    def from_settings(cls, lab: Mapping[str, Any], **overrides: Any) -> LabParameters:
-        """From the ``lab:`` config section (a plain mapping), with per-session overrides.
+    def from_settings(cls, lab: Lab, **overrides: Any) -> LabParameters:
+        """From the typed ``lab:`` section, with per-session overrides.
 
         Parameters
         ----------
-        lab : mapping
-            ``config.section("lab")``.
+        lab : Lab
+            ``settings.lab``.
         **overrides
             Fields of this class; ``None`` values are ignored.
         """
         values: dict[str, Any] = {
-            "stimulus_s": float(lab.get("stimulus_s", 1.0)),
-            "gap_s": float(lab.get("gap_ms", 500.0)) / 1000.0,
-            "familiarisation_pairs": int(lab.get("familiarisation_pairs", 30)),
-            "gain_min": float(lab.get("gain_min", 0.2)),
-            "gain_max": float(lab.get("gain_max", 5.0)),
-            "level": float(lab.get("level", 0.75)),
+            "stimulus_s": lab.stimulus_s,
+            "gap_s": lab.gap_ms / 1000.0,
+            "familiarisation_pairs": lab.familiarisation_pairs,
+            "gain_min": lab.gain_min,
+            "gain_max": lab.gain_max,
+            "level": lab.level,
         }
         values.update({k: v for k, v in overrides.items() if v is not None})
         return cls(**values)

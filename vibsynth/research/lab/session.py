@@ -26,8 +26,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from vibsynth._version import __version__
 from vibsynth.errors import InputError, ParameterError
 from vibsynth.formats.files import atomic_write_text, fsync_folder, read_text
 from vibsynth.formats.recordings import read_recording, write_wav
@@ -41,6 +42,9 @@ from vibsynth.research.lab.protocol import (
 )
 from vibsynth.research.lab.records import Answer, check_row, columns, make_row, parse_timestamp, timestamp
 from vibsynth.research.lab.stimuli import Stimulus
+
+if TYPE_CHECKING:
+    from vibsynth.settings.models_lab import Lab
 
 __all__ = [
     "SESSION_FILE",
@@ -76,9 +80,9 @@ def default_root() -> Path:
     return Path(platformdirs.user_data_dir("vibsynth", appauthor=False)) / "lab"
 
 
-def sessions_root(lab: Mapping[str, Any] | None = None) -> Path:
-    """Where sessions go: ``lab.folder`` of the config, else :func:`default_root`."""
-    folder = (lab or {}).get("folder")
+def sessions_root(lab: Lab | None = None) -> Path:
+    """Where sessions go: ``lab.folder`` of the typed ``lab:`` section, else :func:`default_root`."""
+    folder = lab.folder if lab is not None else None
     return Path(folder).expanduser() if folder else default_root()
 
 
@@ -359,8 +363,6 @@ class Session:
                 rel = f"{STIMULI_DIR}/{s.id}.wav"
                 write_wav(target / rel, s.samples, s.fs)
                 entries[s.id] = {"file": rel, "params": json_ready(dict(s.params))}
-            from vibsynth import __version__
-
             meta = {
                 "format": SESSION_FORMAT,
                 "version": SESSION_VERSION,
