@@ -204,6 +204,15 @@ def run_dissimilarity(browser, root, stimuli, participant, seed, t1, *, familiar
             assert k == 0
             fam_seen += 1
             value = 0.5
+            if extras and fam_seen == 1:
+                # keyboard steps a person can use: 1 % of the scale per arrow, 10 % with Page Up
+                from selenium.webdriver.common.keys import Keys
+
+                slider.send_keys(Keys.ARROW_RIGHT)
+                assert float(slider.get_attribute("value")) == pytest.approx(0.51)
+                slider.send_keys(Keys.PAGE_UP)
+                assert float(slider.get_attribute("value")) == pytest.approx(0.61)
+                assert visible(browser, "lab-next").get_attribute("disabled") is None  # a key press is a move
         else:
             a, b = plan["test"][k - 1]["stimuli"]
             value = abs(t1[a] - t1[b]) / scale

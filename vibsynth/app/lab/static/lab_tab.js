@@ -2,6 +2,8 @@
 // The server runs the trials and plays the stimuli; this page only shows what the participant may
 // see (never a stimulus' name) and sends the answers. docs/lab.md explains the protocols.
 
+import { keySteps } from "/static/js/keysteps.js";
+
 const PROTOCOLS = {
   intensity: {
     label: "Intensity (experiment 1)",
@@ -227,10 +229,14 @@ export async function mount(panel, studio) {
   let touched = false;
   let gainTimer = null;
 
-  function slider(attrs, low, high) {
+  // Rating sliders (0..1) step 1 % per arrow key, 10 % with Shift or Page Up/Down (the
+  // studio's keyboard steps); the intensity slider keeps its log step per key (GAIN_STEP).
+  function slider(attrs, low, high, { steps = true } = {}) {
+    const input = el("input", { type: "range", ...attrs });
+    if (steps) keySteps(input);
     return el("div", { class: "scale" },
       el("span", { class: "end", text: low }),
-      el("input", { type: "range", ...attrs }),
+      input,
       el("span", { class: "end", text: high }));
   }
 
@@ -247,7 +253,8 @@ export async function mount(panel, studio) {
     } else if (state.protocol === "intensity") {
       const [lo, hi] = state.gain_range.map(Math.log10);
       const row = slider({ "data-testid": "lab-answer", min: String(lo), max: String(hi), step: String(GAIN_STEP),
-        value: String(state.start), "aria-label": "Intensity of the stimulus: weaker to stronger" }, "weaker", "stronger");
+        value: String(state.start), "aria-label": "Intensity of the stimulus: weaker to stronger" }, "weaker", "stronger",
+        { steps: false });
       const input = row.querySelector("input");
       input.addEventListener("input", () => liveGain(Number(input.value)));
       answers.append(el("div", { class: "buttons" },
