@@ -1,24 +1,26 @@
 #!/usr/bin/env bash
 # Run a command with a private JACK server on the dummy driver (real-time paced, no sound card).
-#   scripts/with_jack.sh [--rate HZ] [--period FRAMES] [--playback PORTS] -- COMMAND...
+#   scripts/with_jack.sh [--rate HZ] [--period FRAMES] [--playback PORTS] [--capture PORTS] -- COMMAND...
 # The dummy device has 16 playback ports by default (the 4 x 4 vest layout, docs/vr.md), so
-# multi-channel outputs open on it.
+# multi-channel outputs open on it, and 8 capture ports (system:capture_1..8, silent), so
+# inputs (serve --follow, calibration) open on it too.
 # The server gets a unique name (JACK_DEFAULT_SERVER), so several runs can coexist;
 # it is stopped only after COMMAND has exited (PortAudio aborts if JACK vanishes under it).
 set -u
-rate=48000; period=128; playback=16
+rate=48000; period=128; playback=16; capture=8
 while [ $# -gt 0 ]; do
   case "$1" in
     --rate) rate=$2; shift 2;;
     --period) period=$2; shift 2;;
     --playback) playback=$2; shift 2;;
+    --capture) capture=$2; shift 2;;
     --) shift; break;;
     *) break;;
   esac
 done
 export JACK_DEFAULT_SERVER="vibsynth-$$"
 export JACK_NO_AUDIO_RESERVATION=1
-jackd -n "$JACK_DEFAULT_SERVER" -R -d dummy -r "$rate" -p "$period" -P "$playback" >"/tmp/jackd-$JACK_DEFAULT_SERVER.log" 2>&1 &
+jackd -n "$JACK_DEFAULT_SERVER" -R -d dummy -r "$rate" -p "$period" -P "$playback" -C "$capture" >"/tmp/jackd-$JACK_DEFAULT_SERVER.log" 2>&1 &
 jack_pid=$!
 # Stop the server whatever happens to this script (a killed test run must not leave a
 # real-time jackd behind: a stray one steals the CPU from the next run's audio thread).
@@ -27,7 +29,7 @@ trap 'exit 130' INT TERM
 if ! jack_wait -w -t 10 >/dev/null 2>&1; then
   # Without real-time privileges jackd -R can fail: fall back to a non-RT server.
   kill "$jack_pid" 2>/dev/null; wait "$jack_pid" 2>/dev/null
-  jackd -n "$JACK_DEFAULT_SERVER" -d dummy -r "$rate" -p "$period" -P "$playback" >"/tmp/jackd-$JACK_DEFAULT_SERVER.log" 2>&1 &
+  jackd -n "$JACK_DEFAULT_SERVER" -d dummy -r "$rate" -p "$period" -P "$playback" -C "$capture" >"/tmp/jackd-$JACK_DEFAULT_SERVER.log" 2>&1 &
   jack_pid=$!
   trap 'kill "$jack_pid" 2>/dev/null; wait "$jack_pid" 2>/dev/null' EXIT
   if ! jack_wait -w -t 10 >/dev/null 2>&1; then

@@ -38,15 +38,8 @@ from typing import Any
 import numpy as np
 
 from vibsynth.engine.engine import Engine
-from vibsynth.engine.pa_runtime import PortAudioRuntime
-from vibsynth.engine.supervisor import (
-    HEARTBEAT_TIMEOUT_S,
-    STOPPED,
-    STREAMING,
-    Backoff,
-    HungCallError,
-    StreamSupervisor,
-)
+from vibsynth.engine.pa_stream import PortAudioStream, import_sounddevice
+from vibsynth.engine.supervisor import HEARTBEAT_TIMEOUT_S, STOPPED, STREAMING, Backoff
 from vibsynth.errors import DeviceError, ParameterError
 
 __all__ = [
@@ -140,16 +133,6 @@ class OutputBackend:
 
 
 # ---------------------------------------------------------------------- sounddevice
-def import_sounddevice() -> ModuleType:
-    """Import python-sounddevice (a dependency), turning a missing PortAudio into :class:`DeviceError`."""
-    try:
-        import sounddevice
-    except OSError as exc:  # the PortAudio shared library is missing
-        raise DeviceError(f"PortAudio is not available ({exc}); install libportaudio2") from None
-    module: ModuleType = sounddevice
-    return module
-
-
 def _host_api_index(sd: ModuleType, host_api: str | int | None) -> int | None:
     if host_api is None:
         return None
@@ -166,42 +149,43 @@ def _host_api_index(sd: ModuleType, host_api: str | int | None) -> int | None:
     raise DeviceError(f"no host API matches {host_api!r} (available: {names})")
 
 
-def resolve_device(sd: ModuleType, device: str | int | None, host_api: str | int | None = None) -> int:
-    """Index of the output device chosen by index, name substring and/or host API.
+def resolve_device(
+    sd: ModuleType, device: str | int | None, host_api: str | int | None = None, *, kind: str = "output"
+) -> int:
+    """Index of the ``kind`` (output or input) device chosen by index, name substring and/or host API.
 
     Raises
     ------
     DeviceError
-        No output device at all, or none (or several) matching.
+        No such device at all, or none (or several) matching.
     """
     devices = sd.query_devices()
     api = _host_api_index(sd, host_api)
-    outputs = [
-        i for i, d in enumerate(devices) if d["max_output_channels"] > 0 and (api is None or d["hostapi"] == api)
-    ]
+    key = f"max_{kind}_channels"
+    found = [i for i, d in enumerate(devices) if d.get(key, 0) > 0 and (api is None or d["hostapi"] == api)]
     where = f" on host API {sd.query_hostapis(api)['name']!r}" if api is not None else ""
-    if not outputs:
-        raise DeviceError(f"no audio output device found{where}")
+    if not found:
+        raise DeviceError(f"no audio {kind} device found{where}")
     if device is None or device == "":
         if api is not None:
-            default = sd.query_hostapis(api)["default_output_device"]
+            default = sd.query_hostapis(api).get(f"default_{kind}_device", -1)
         else:
-            default = sd.default.device[1]
-        if isinstance(default, (int, np.integer)) and default in outputs:
+            default = sd.default.device[1 if kind == "output" else 0]
+        if isinstance(default, (int, np.integer)) and default in found:
             return int(default)
-        return outputs[0]
+        return found[0]
     if isinstance(device, (int, np.integer)) or str(device).strip().isdigit():
         index = int(device)
-        if index not in outputs:
-            raise DeviceError(f"device {index} is not an output device{where} (see `vibsynth devices`)")
+        if index not in found:
+            raise DeviceError(f"device {index} is not an {kind} device{where} (see `vibsynth devices`)")
         return index
     wanted = str(device).lower()
-    matches = [i for i in outputs if wanted in devices[i]["name"].lower()]
+    matches = [i for i in found if wanted in devices[i]["name"].lower()]
     exact = [i for i in matches if devices[i]["name"].lower() == wanted]
     if exact:
         return exact[0]
     if not matches:
-        raise DeviceError(f"no output device matches {device!r}{where} (see `vibsynth devices`)")
+        raise DeviceError(f"no {kind} device matches {device!r}{where} (see `vibsynth devices`)")
     if len(matches) > 1:
         names = "; ".join(f"{i}: {devices[i]['name']}" for i in matches)
         raise DeviceError(f"device {device!r} is ambiguous ({names}); give an index or a longer name")
@@ -216,16 +200,17 @@ def list_devices() -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     return apis, devices
 
 
-class SoundDeviceOutput(OutputBackend):
+class SoundDeviceOutput(PortAudioStream, OutputBackend):
     """PortAudio callback stream, supervised: a lost device is retried until it comes back.
 
     Streams are created in one place, :meth:`_open_stream`. A
     :class:`~vibsynth.engine.supervisor.StreamSupervisor` thread watches the engine's
     heartbeat (``engine.stats.blocks``, advanced by the compiled callback) and the
     stream's health; after a loss it drops the stream, re-scans PortAudio
-    (:class:`~vibsynth.engine.pa_runtime.PortAudioRuntime`) and reopens with back-off.
-    The engine object is kept, so the knobs are unchanged. Every PortAudio call that
-    may block is bounded in time and abandoned if it hangs.
+    (:class:`~vibsynth.engine.pa_runtime.PortAudioRuntime`, shared with a device input) and
+    reopens with back-off. The engine object is kept, so the knobs are unchanged. Every
+    PortAudio call that may block is bounded in time and abandoned if it hangs. The life
+    cycle is :class:`~vibsynth.engine.pa_stream.PortAudioStream`'s.
 
     Parameters
     ----------
@@ -273,11 +258,7 @@ class SoundDeviceOutput(OutputBackend):
         backoff: Backoff | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        super().__init__(engine)
-        self.device = device
-        self.host_api = host_api
-        self.block_size = int(block_size)
-        self.latency = latency
+        OutputBackend.__init__(self, engine)
         mapping = list(channel_map) if channel_map else list(range(1, engine.channels + 1))
         if len(mapping) != engine.channels or any(int(m) < 1 for m in mapping) or len(set(mapping)) != len(mapping):
             raise ParameterError(
@@ -286,24 +267,23 @@ class SoundDeviceOutput(OutputBackend):
         self.channel_map = [int(m) - 1 for m in mapping]
         self.device_channels = max(self.channel_map) + 1
         self.stats = CallbackStats(engine)  # type: ignore[assignment]
-        self.restart = restart
-        self._sd: ModuleType | None = None
-        self._runtime: PortAudioRuntime | None = None
-        self._stream: Any = None
-        self._device_index: int | None = None
-        self._on_jack = False
-        self._want_running = False
-        self._failed = False
-        self._started = False  # the current stream was started (so inactive = it stopped by itself)
-        self._closing = False
-        self._lock = threading.Lock()
         self._reported_errors = 0
         self.last_error: BaseException | None = None
-        self.supervisor = StreamSupervisor(self, heartbeat_timeout_s=heartbeat_timeout_s, backoff=backoff, clock=clock)
+        PortAudioStream.__init__(
+            self,
+            "output",
+            device=device,
+            host_api=host_api,
+            block_size=block_size,
+            latency=latency,
+            restart=restart,
+            heartbeat_timeout_s=heartbeat_timeout_s,
+            backoff=backoff,
+            clock=clock,
+        )
 
-    def _finished(self) -> None:
-        if self._want_running:
-            self._failed = True
+    def _import_sounddevice(self) -> ModuleType:
+        return import_sounddevice()  # looked up here, so tests can stand in a fake PortAudio
 
     # -- stream creation ---------------------------------------------------------------
     def _create_stream(self) -> Any:
@@ -347,158 +327,13 @@ class SoundDeviceOutput(OutputBackend):
             finished_callback=self._finished,
         )
 
-    def _portaudio(self) -> PortAudioRuntime:
-        if self._sd is None:
-            self._sd = import_sounddevice()
-        if self._runtime is None:
-            self._runtime = PortAudioRuntime(self._sd)
-        return self._runtime
-
-    def _new_stream(self) -> Any:
-        """:meth:`_create_stream` with a time limit; notes whether the device is on JACK."""
-        stream = self._portaudio().call(self._create_stream, "opening the audio device")
-        self._on_jack = "jack" in self._host_api_name().lower()
-        return stream
-
-    def _host_api_name(self) -> str:
-        try:
-            sd: Any = self._sd
-            return str(sd.query_hostapis(sd.query_devices(self._device_index)["hostapi"])["name"])
-        except Exception:  # noqa: BLE001 - informative only
-            return ""
-
-    # -- life cycle ---------------------------------------------------------------
-    def open(self) -> None:
-        """Open (not start) the stream: after this the device ports exist (JACK tests connect here)."""
-        if self._stream is not None:
-            return
-        stream = self._new_stream()
-        with self._lock:
-            self._stream, self._failed, self._started = stream, False, False
-
-    def start(self) -> None:
-        self.open()
-        self._want_running, self._closing = True, False
-        try:
-            self._portaudio().call(self._stream.start, "starting the audio stream")
-        except Exception as exc:
-            raise DeviceError(f"cannot start the audio stream: {exc}") from None
-        self._started = True
-        self.supervisor.begin()
-        if self.restart:
-            self.supervisor.start_thread()
-
-    def stop(self) -> None:
-        """Stop supervising, then stop and close the stream; returns within about 1.3 s whatever happens."""
-        self._want_running = False
-        with self._lock:
-            self._closing = True
-            stream, self._stream = self._stream, None
-        self.supervisor.stop()
-        if stream is not None and self._runtime is not None:
-            fault = self._fault_of(stream) if self._started else None
-            dead = self._on_jack and fault is not None
-            if not self._runtime.close(stream, dead=dead, graceful=fault is None) and self._on_jack:
-                self._runtime.mark_dirty("its JACK stream did not close")
-
-    def shutdown_portaudio(self) -> bool:
-        """At process exit, after :meth:`stop`: terminate PortAudio if that is safe.
-
-        Returns False when PortAudio could not be terminated cleanly (after a device
-        loss, or a hung call): the process should then end with
-        :func:`~vibsynth.engine.supervisor.hard_exit`. See :meth:`PortAudioRuntime.shutdown`.
-        """
-        return True if self._runtime is None else self._runtime.shutdown()
-
-    def is_running(self) -> bool:
-        stream = self._stream
-        try:
-            return stream is not None and bool(stream.active)
-        except Exception:  # noqa: BLE001 - a PortAudio error: not running
-            return False
-
-    @property
-    def state(self) -> str:
-        return self.supervisor.state
-
-    @property
-    def state_reason(self) -> str:
-        return self.supervisor.reason
-
     # -- what the supervisor calls (SupervisedStream) -------------------------------
     def heartbeat(self) -> int:
         return int(self.engine.stats.blocks)
 
-    def _fault_of(self, stream: Any) -> str | None:
-        if stream is None:
-            return "no stream"
-        try:
-            active = bool(stream.active) and not self._failed
-        except Exception as exc:  # noqa: BLE001 - sd.PortAudioError
-            return f"PortAudio error: {exc}"
-        if active:
-            return None
-        # PortAudio's JACK host API marks its streams inactive when the server goes away
-        # (it calls no finished callback); elsewhere the stream ends by itself.
-        return "JACK server shut down" if self._on_jack else "stream stopped"
-
-    def stream_fault(self) -> str | None:
-        return self._fault_of(self._stream)
-
-    def drop_stream(self) -> None:
-        with self._lock:
-            stream, self._stream = self._stream, None
-        if stream is None or self._runtime is None:
-            return
-        # A JACK stream that went inactive by itself: its server is gone and any call on it
-        # would wait 10 min (then abort the process); never call it again.
-        dead = self._on_jack and self._started and self._fault_of(stream) is not None
-        self._runtime.close(stream, dead=dead)
-        if self._on_jack:
-            self._runtime.mark_dirty("its JACK stream was lost")
-
-    def reopen(self) -> str:
-        runtime = self._portaudio()
-        if self._closing:
-            raise DeviceError("the output is closing")
-        runtime.reinitialize()
-        try:
-            stream = self._new_stream()
-        except HungCallError:
-            raise
-        except DeviceError:
-            self._settle()
-            raise
-        with self._lock:
-            closing = self._closing
-            if not closing:
-                self._stream, self._failed, self._started = stream, False, False
-        if closing:
-            runtime.close(stream, dead=False)
-            raise DeviceError("the output is closing")
-        try:
-            runtime.call(stream.start, "starting the audio stream")
-        except HungCallError:
-            with self._lock:
-                if self._stream is stream:
-                    self._stream = None
-            runtime.abandon(stream, "starting a stream hung")
-            raise
-        except Exception as exc:
-            self.drop_stream()
-            self._settle()
-            raise DeviceError(f"cannot start the audio stream: {exc}") from None
-        self._started = True
+    def _recovered(self) -> None:
         self.stats.restarts += 1
         self.engine.stats.output_errors += 1
-        return self._device_label()
-
-    def _settle(self) -> None:
-        """After a failed attempt: terminate PortAudio now, while its servers were just seen alive."""
-        try:
-            self._runtime.terminate()  # type: ignore[union-attr]
-        except DeviceError as exc:
-            log.info("terminating PortAudio after a failed retry: %s", exc)
 
     def housekeeping(self) -> None:
         errors = self.stats.errors
@@ -507,13 +342,6 @@ class SoundDeviceOutput(OutputBackend):
             log.error("audio callback error (block filled with silence): %r", self.last_error)
 
     # -- description ------------------------------------------------------------------
-    def _device_label(self) -> str:
-        try:
-            info = self._sd.query_devices(self._device_index)  # type: ignore[union-attr]
-            return f"{info['name']} ({self._host_api_name()})"
-        except Exception:  # noqa: BLE001 - informative only
-            return "?"
-
     def describe(self) -> str:
         latency = getattr(self._stream, "latency", None)
         lat = f", latency {1000 * latency:.1f} ms" if isinstance(latency, float) else ""

@@ -15,6 +15,14 @@ library is loaded (its own globals) and sounddevice is pointed at it. The old on
 loaded for good (unloading it makes libjack call into freed code) and costs a few hundred
 KB per device loss. At exit a dirty instance is not terminated either: sounddevice's
 ``atexit`` hook is disarmed instead.
+
+One runtime serves every stream of a process (:func:`shared_runtime`: the output and the
+input, which on JACK share PortAudio's one JACK client). ``Pa_Terminate`` closes *every*
+stream of the instance, so a re-scan is skipped while an attached stream still plays
+(:meth:`PortAudioRuntime.attach`; a stream that lost its device re-opens on the instance as it
+is); :attr:`PortAudioRuntime.epoch` counts the re-scans, so a stream opened before the last one
+is known to be gone without calling it; :attr:`PortAudioRuntime.lock` serialises the streams'
+re-scans and opens.
 """
 
 from __future__ import annotations
@@ -24,14 +32,15 @@ import os
 import shutil
 import tempfile
 import threading
+import weakref
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from vibsynth.engine.supervisor import HungCallError, call_with_timeout
 from vibsynth.errors import DeviceError
 
-__all__ = ["PortAudioRuntime", "load_library_copy", "CALL_TIMEOUT_S"]
+__all__ = ["PortAudioRuntime", "StreamPeer", "shared_runtime", "load_library_copy", "CALL_TIMEOUT_S"]
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +52,8 @@ SoundDevice = Any
 CALL_TIMEOUT_S = 2.0
 #: Time limit of stopping/closing a stream before it is abandoned.
 CLOSE_TIMEOUT_S = 1.0
+#: How long closing a stream waits for another stream's re-scan or open to finish.
+LOCK_WAIT_S = 0.25
 #: No new re-scan while this many abandoned PortAudio calls have not returned: they may
 #: hold a driver-wide lock (libjack's client-open mutex), so more attempts would only pile up.
 MAX_HUNG_CALLS = 2
@@ -157,6 +168,13 @@ class _StderrMute:
                 os.close(saved)
 
 
+class StreamPeer(Protocol):
+    """A stream attached to a runtime (:class:`~vibsynth.engine.pa_stream.PortAudioStream`)."""
+
+    def stream_alive(self) -> bool:
+        """True while it holds a healthy stream (called under the runtime's lock)."""
+
+
 class PortAudioRuntime:
     """One sounddevice module's PortAudio instance, re-scannable after device loss.
 
@@ -176,6 +194,11 @@ class PortAudioRuntime:
         Why this instance must never be terminated or re-used ("" = clean).
     generation : int
         Library instances loaded so far (0 = the one sounddevice loaded).
+    epoch : int
+        Re-scans so far (``Pa_Terminate`` or a fresh library): a stream opened in an
+        earlier epoch is closed or retired and must never be called again.
+    lock : threading.RLock
+        Held by a stream around a re-scan and its open, so two streams never interleave them.
     """
 
     def __init__(
@@ -192,8 +215,27 @@ class PortAudioRuntime:
         self.close_timeout_s = float(close_timeout_s)
         self.dirty = ""
         self.generation = 0
+        self.epoch = 0
+        self.lock = threading.RLock()
+        self._peers: list[weakref.ref[StreamPeer]] = []
         self._stderr = _StderrMute()
         self._hung: list[tuple[str, threading.Event]] = []
+
+    # -- streams sharing the instance -------------------------------------------------
+    def attach(self, peer: StreamPeer) -> None:
+        """Let ``peer``'s stream veto re-scans while it plays (held weakly)."""
+        self._peers = [ref for ref in self._peers if ref() is not None and ref() is not peer]
+        self._peers.append(weakref.ref(peer))
+
+    def _peer_playing(self) -> bool:
+        for ref in self._peers:
+            peer = ref()
+            try:
+                if peer is not None and peer.stream_alive():
+                    return True
+            except Exception as exc:  # noqa: BLE001 - a broken peer must not block the others
+                log.info("asking a stream whether it plays: %s", exc)
+        return False
 
     # -- bounded calls ---------------------------------------------------------------
     def call(self, fn: Callable[[], Any], what: str, timeout_s: float | None = None) -> Any:
@@ -233,15 +275,27 @@ class PortAudioRuntime:
         DeviceError
             PortAudio could not be initialised (or a call hung: :class:`HungCallError`).
         """
+        with self.lock:
+            self._reinitialize()
+
+    def _reinitialize(self) -> None:
         sd = self.sd
         hung = self.hung()
         if len(hung) >= MAX_HUNG_CALLS:
             raise DeviceError(f"waiting for {len(hung)} hung PortAudio calls to return ({', '.join(hung)})")
+        if self._peer_playing():
+            # Another stream plays on this instance: a re-scan would close it. Open on the
+            # instance as it is (its device list is as fresh as that stream's).
+            if self.dirty:
+                raise DeviceError(f"PortAudio needs a re-scan ({self.dirty}) but another stream still plays on it")
+            if getattr(sd, "_initialized", 0) > 0:
+                return
         if self.dirty:
             lib = self.call(lambda: self.fresh_library(sd), "loading a fresh PortAudio library")
             _KEEP_ALIVE.append(sd._lib)
             sd._lib, sd._initialized = lib, 0
             self.generation += 1
+            self.epoch += 1
             self.dirty = ""
             log.info("PortAudio instance %d loaded", self.generation)
         else:
@@ -268,10 +322,19 @@ class PortAudioRuntime:
             sd._initialized += 1
 
     def terminate(self) -> None:
-        """``Pa_Terminate`` until uninitialised, unless dirty (then nothing: it could abort the process)."""
+        """``Pa_Terminate`` until uninitialised, unless dirty (then nothing: it could abort the process).
+
+        Nothing either while an attached stream plays (``Pa_Terminate`` would close it).
+        """
+        with self.lock:
+            self._terminate()
+
+    def _terminate(self) -> None:
         sd = self.sd
-        if self.dirty:
+        if self.dirty or self._peer_playing():
             return
+        if getattr(sd, "_initialized", 0) > 0:
+            self.epoch += 1
         while getattr(sd, "_initialized", 0) > 0:
             try:
                 self.call(sd._terminate, "terminating PortAudio")
@@ -282,6 +345,10 @@ class PortAudioRuntime:
                 log.info("Pa_Terminate: %s", exc)
 
     # -- streams -----------------------------------------------------------------------
+    def forget(self, stream: Any) -> None:
+        """Never call ``stream`` again (a re-scan closed it, or retired its instance); keep it alive."""
+        _KEEP_ALIVE.append(stream)
+
     def abandon(self, stream: Any, why: str) -> None:
         """Keep ``stream`` alive for good without calling it again; the instance becomes dirty."""
         _KEEP_ALIVE.append(stream)
@@ -312,6 +379,8 @@ class PortAudioRuntime:
             _stream_call(self.sd, lib, stream, "Pa_CloseStream")
             return True
 
+        # Not in the middle of another stream's re-scan or open, if it can be helped (exits are bounded).
+        locked = self.lock.acquire(timeout=LOCK_WAIT_S)
         try:
             closed = self.call(shut, "closing the audio stream", self.close_timeout_s)
         except HungCallError:
@@ -320,6 +389,9 @@ class PortAudioRuntime:
         except Exception as exc:  # noqa: BLE001 - a stand-in stream's error: treat as closed
             log.info("closing the audio stream: %s", exc)
             return True
+        finally:
+            if locked:
+                self.lock.release()
         if not closed:
             self.abandon(stream, "its stream could not be stopped")
         return bool(closed)
@@ -340,3 +412,17 @@ class PortAudioRuntime:
             self.sd._initialized = 0
             return False
         return not _KEEP_ALIVE  # retired instances/streams: libjack may still hold their clients
+
+
+_SHARED: dict[int, tuple[SoundDevice, PortAudioRuntime]] = {}
+_SHARED_LOCK = threading.Lock()
+
+
+def shared_runtime(sd: SoundDevice) -> PortAudioRuntime:
+    """The one :class:`PortAudioRuntime` of ``sd`` (the sounddevice module) in this process."""
+    with _SHARED_LOCK:
+        entry = _SHARED.get(id(sd))
+        if entry is None or entry[0] is not sd:
+            entry = (sd, PortAudioRuntime(sd))
+            _SHARED[id(sd)] = entry
+        return entry[1]

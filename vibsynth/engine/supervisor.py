@@ -188,6 +188,8 @@ class StreamSupervisor:
         Retry delays (default 0.25 s doubling to 2 s).
     clock : callable
         Monotonic seconds (``time.monotonic``).
+    name : str
+        What the stream is, in log messages ("audio device", "audio input device").
 
     Attributes
     ----------
@@ -213,8 +215,10 @@ class StreamSupervisor:
         backoff: Backoff | None = None,
         clock: Callable[[], float] = time.monotonic,
         poll_interval_s: float = POLL_INTERVAL_S,
+        name: str = "audio device",
     ) -> None:
         self.host = host
+        self.name = name
         self.heartbeat_timeout_s = float(heartbeat_timeout_s)
         self.backoff = backoff or Backoff()
         self.clock = clock
@@ -273,7 +277,10 @@ class StreamSupervisor:
             self.recovered_after_s = now - self.lost_at
             self.recoveries += 1
             log.warning(
-                "audio device back: streaming again after %.2f s (%d attempt(s))", self.recovered_after_s, self.attempts
+                "%s back: streaming again after %.2f s (%d attempt(s))",
+                self.name,
+                self.recovered_after_s,
+                self.attempts,
             )
         self.reason, self.last_error, self.attempts = "", "", 0
 
@@ -284,7 +291,8 @@ class StreamSupervisor:
             self.reason, self.lost_at, self.attempts = reason, now, 0
             self.losses += 1
             log.warning(
-                "audio device lost: %s; retrying every %g-%g s (OSC/MIDI keep working)",
+                "%s lost: %s; retrying every %g-%g s (OSC/MIDI keep working)",
+                self.name,
                 reason,
                 self.backoff.first,
                 self.backoff.maximum,
@@ -305,7 +313,7 @@ class StreamSupervisor:
         except Exception as exc:  # noqa: BLE001 - DeviceError mostly; anything else is a failed try too
             self.last_error = str(exc) or type(exc).__name__
             if self.attempts == 1:
-                log.warning("audio device still unavailable: %s", self.last_error)
+                log.warning("%s still unavailable: %s", self.name, self.last_error)
             else:
                 log.info("audio retry %d failed: %s", self.attempts, self.last_error)
             self.next_retry_at = self.clock() + self.backoff.next()
