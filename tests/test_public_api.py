@@ -58,18 +58,26 @@ def test_public_names_resolve_lazily():
         exec("from vibsynth import nope", {})
 
 
-def test_version_is_written_in_pyproject_only():
-    written = re.search(r'(?m)^version\s*=\s*"([^"]+)"', (ROOT / "pyproject.toml").read_text()).group(1)
+def test_version_is_written_once_in_its_module():
+    version_file = ROOT / "vibsynth" / "_version.py"
+    written = re.search(r'(?m)^__version__ = "([^"]+)"$', version_file.read_text()).group(1)
     assert vibsynth.__version__ == importlib.metadata.version("vibsynth") == written
     from vibsynth import __version__
+    from vibsynth._version import __version__ as below
 
-    assert __version__ == written
+    assert __version__ == below == written
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    project = pyproject.split("\n[project]\n", 1)[1].split("\n[", 1)[0]
+    assert 'dynamic = ["version"]' in project and not re.search(r"(?m)^version\s*=", project)
+    assert 'version = { attr = "vibsynth._version.__version__" }' in pyproject  # read from the module
     out = subprocess.run(
         [sys.executable, "-m", "vibsynth", "--version"], capture_output=True, text=True, timeout=60, cwd=ROOT
     )
     assert out.stdout.strip() == f"vibsynth {written}"
     # no other version string in the package
     for path in (ROOT / "vibsynth").rglob("*.py"):
+        if path == version_file:
+            continue
         text = path.read_text(encoding="utf-8")
         assert not re.search(r"__version__\s*=", text), path
         assert f'"{written}"' not in text, path

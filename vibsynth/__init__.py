@@ -16,7 +16,7 @@ The public API (docs/python.md) is the names below. They are imported on first u
 ``Preset``              a named texture
 ``Client``              drive a running ``vibsynth serve`` over OSC
 ``VibsynthError``       base class of every error raised on purpose
-``__version__``         the installed version (pyproject.toml is the one place it is written)
+``__version__``         the version (written in ``vibsynth/_version.py`` only; pyproject.toml reads it)
 ======================  ==========================================================
 """
 
@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import importlib
 from typing import TYPE_CHECKING, Any
+
+from vibsynth._version import __version__
 
 if TYPE_CHECKING:
     from vibsynth.app.api import analyze, render
@@ -62,31 +64,10 @@ _LAZY = {
 }
 
 
-def _version() -> str:
-    """The installed distribution's version; from pyproject.toml beside the package when not installed."""
-    from importlib import metadata
-
-    try:
-        return metadata.version("vibsynth")
-    except metadata.PackageNotFoundError:
-        import re
-        from pathlib import Path
-
-        pyproject = Path(__file__).resolve().parent.parent / "pyproject.toml"
-        try:
-            found = re.search(r'(?m)^version\s*=\s*"([^"]+)"', pyproject.read_text(encoding="utf-8"))
-        except OSError:
-            found = None
-        return found.group(1) if found else "0+unknown"
-
-
 def __getattr__(name: str) -> Any:
-    if name == "__version__":
-        value: Any = _version()
-    elif name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-    else:
+    if name not in _LAZY:
         raise AttributeError(f"module 'vibsynth' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_LAZY[name]), name)
     globals()[name] = value  # later look-ups skip __getattr__
     return value
 

@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from vibsynth import __version__
+from vibsynth._version import __version__
 
 __all__ = ["engine_status", "output_status", "channel_status", "engine_stat"]
 

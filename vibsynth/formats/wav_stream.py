@@ -50,7 +50,7 @@ _U32_MAX = 0xFFFFFFFF
 _WRITE_BUFFER = 1 << 20
 
 
-def encode_samples(samples: NDArray[Any], sample_format: str) -> NDArray[Any]:
+def encode_samples(samples: NDArray[np.floating[Any]], sample_format: str) -> NDArray[np.float32] | NDArray[np.int16]:
     """Samples as stored in the file: float32, or pcm16 clipped to [-1, 32767/32768] and rounded.
 
     Element by element, so a block gives the same values as the whole signal
@@ -68,9 +68,9 @@ def encode_samples(samples: NDArray[Any], sample_format: str) -> NDArray[Any]:
     """
     data = np.asarray(samples)
     if sample_format == "float32":
-        return data.astype("<f4", copy=False)
-    if sample_format == "pcm16":
-        return np.round(np.clip(data, -1.0, 32767 / 32768) * 32768).astype("<i2")
+        return data.astype(np.dtype("<f4"), copy=False)
+    if sample_format == "pcm16":  # typed dtypes: the result's type is known (not Any) to strict callers
+        return np.round(np.clip(data, -1.0, 32767 / 32768) * 32768).astype(np.dtype("<i2"))
     raise ParameterError(f"unknown sample format {sample_format!r}; use float32 or pcm16")
 
 
@@ -263,7 +263,7 @@ class WavStreamWriter:
         return header, rf64, fact_at, data_size_at
 
     # ------------------------------------------------------------------ writing
-    def write(self, samples: NDArray[Any]) -> None:
+    def write(self, samples: NDArray[np.floating[Any]]) -> None:
         """Append frames.
 
         Parameters

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vibsynth import __version__
+from vibsynth._version import __version__
 from vibsynth.dsp.basis import Basis, band_powers_from_psd, fit_basis, to_db
 from vibsynth.dsp.filterbank import band_powers
 from vibsynth.errors import InputError, ParameterError

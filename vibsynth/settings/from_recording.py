@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from vibsynth import __version__
+from vibsynth._version import __version__
 from vibsynth.dsp.analysis import Analysis
 from vibsynth.settings.presets import BALANCE_LIMIT, Preset
 

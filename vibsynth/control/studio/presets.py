@@ -26,7 +26,7 @@ from typing import Any
 
 from aiohttp import web
 
-from vibsynth import __version__
+from vibsynth._version import __version__
 from vibsynth.control.studio.periodic import WhilePagesOpen
 from vibsynth.errors import PresetError
 from vibsynth.settings.models_preset import NAME_PATTERN, NAME_RULE, PRESET_VERSION, PresetModel

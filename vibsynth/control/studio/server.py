@@ -33,6 +33,7 @@ from typing import Any
 
 from aiohttp import WSCloseCode, WSMsgType, web
 
+from vibsynth._version import __version__
 from vibsynth.control.controller import Controller, KnobEvent
 from vibsynth.control.studio.commands import (
     ALWAYS,
@@ -315,8 +316,6 @@ class StudioServer:
     def hello(self) -> dict[str, Any]:
         """Everything a page needs to draw itself (the first WebSocket message, and ``/api/state``)."""
         limits = self.controller.limits
-        from vibsynth import __version__
-
         return {
             "type": "hello",
             "version": __version__,
