@@ -29,7 +29,11 @@ __all__ = [
     "jack_server_available",
     "require_jack",
     "JackCapture",
+    "JackPlayer",
     "portaudio_output_ports",
+    "portaudio_input_ports",
+    "counter_value",
+    "counter_frames",
     "capture",
 ]
 
@@ -197,3 +201,109 @@ def capture(sources: Sequence[str], seconds: float) -> tuple[np.ndarray, int]:
 #: waits for the GIL, so a failure is a defect). Each compares with a quiet baseline measured
 #: in the same test, never with an absolute time.
 REALTIME = pytest.mark.realtime
+
+
+def portaudio_input_ports(client, pattern: str = "PortAudio") -> list[str]:
+    """Names of the audio input ports of PortAudio clients (e.g. ``PortAudio:in_0``), in port order."""
+    ports = client.get_ports(name_pattern=pattern, is_audio=True, is_input=True)
+    return sorted((p.name for p in ports), key=lambda name: (len(name), name))
+
+
+#: Period of :func:`counter_value`: frames that the counter signal encodes before it wraps.
+COUNTER_PERIOD = 1 << 16
+
+
+def counter_value(frames: np.ndarray, port: int = 0) -> np.ndarray:
+    """The counter signal :class:`JackPlayer` plays: ``((frame + 4096 port) mod 2**16) / 2**16 - 0.5``.
+
+    Exact in float32, so a received sample names the JACK frame it was played on (modulo 2**16),
+    and each port's differs.
+    """
+    k = (np.asarray(frames, dtype=np.int64) + 4096 * port) % COUNTER_PERIOD
+    return (k / COUNTER_PERIOD - 0.5).astype(np.float32)
+
+
+def counter_frames(values: np.ndarray, port: int = 0) -> np.ndarray:
+    """The JACK frames (mod 2**16) that :func:`counter_value` samples encode."""
+    k = np.round((np.asarray(values, dtype=np.float64) + 0.5) * COUNTER_PERIOD).astype(np.int64)
+    return (k - 4096 * port) % COUNTER_PERIOD
+
+
+class JackPlayer:
+    """A JACK client whose output ports play a known signal: anything can be connected to them.
+
+    Each port ``k`` plays :func:`counter_value` of the JACK frame time of every sample
+    (``signal=None``), or a fixed array (``signal`` of shape (frames, n_ports), then zeros),
+    started by :meth:`play` at the next cycle.
+
+    Attributes
+    ----------
+    gaps : int
+        JACK cycles this (Python) client missed while playing: those cycles' samples were not
+        written (a hole in the instrument, not in what is under test).
+    start_frame : int or None
+        JACK frame time of the first sample of ``signal`` (after :meth:`play`).
+    """
+
+    _count = 0
+
+    def __init__(self, *, n_ports: int = 1, signal: np.ndarray | None = None, name: str = "vibsynth-player") -> None:
+        import jack
+
+        JackPlayer._count += 1
+        self.client = jack.Client(
+            f"{name}-{os.getpid()}-{JackPlayer._count}",
+            no_start_server=True,
+            servername=os.environ.get("JACK_DEFAULT_SERVER") or None,
+        )
+        self.rate = int(self.client.samplerate)
+        self.outports = [self.client.outports.register(f"out_{k + 1}") for k in range(n_ports)]
+        self.signal = None if signal is None else np.asarray(signal, dtype=np.float32).reshape(-1, n_ports)
+        self.position = 0
+        self.start_frame: int | None = None
+        self.gaps = 0
+        self._next_frame: int | None = None
+        self._playing = False
+        self.client.set_process_callback(self._process)
+        self.client.activate()
+
+    def _process(self, frames: int) -> None:
+        now = self.client.last_frame_time
+        if self._next_frame is not None and now != self._next_frame and self._playing:
+            self.gaps += 1
+        self._next_frame = now + frames
+        for k, port in enumerate(self.outports):
+            out = port.get_array()
+            if not self._playing:
+                out[:] = 0.0
+            elif self.signal is None:
+                out[:] = counter_value(np.arange(now, now + frames), k)
+            else:
+                pos = self.position
+                n = max(0, min(frames, self.signal.shape[0] - pos))
+                out[:n] = self.signal[pos : pos + n, k]
+                out[n:] = 0.0
+        if self._playing and self.signal is not None:
+            if self.start_frame is None:
+                self.start_frame = now
+            self.position += frames
+
+    def connect(self, targets: Sequence[str]) -> None:
+        """Connect this client's outputs, in order, to input ports (by name)."""
+        for port, dst in zip(self.outports, targets):
+            self.client.connect(port, dst)
+
+    def play(self) -> None:
+        self._playing = True
+
+    def close(self) -> None:
+        try:
+            self.client.deactivate()
+        finally:
+            self.client.close()
+
+    def __enter__(self) -> JackPlayer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,356 @@
+"""End to end: the input path on real PortAudio -> JACK (dummy driver), beside the output.
+
+* The input's ports appear beside the output's, in PortAudio's one JACK client (``jack_lsp``);
+  a JACK client plays a counter signal (each sample names the JACK frame it was played on)
+  into them, and what the ring returns is that counter, sample for sample, on every channel,
+  with no overflow while the reader keeps up.
+* An input opened beside the output adds no underflows to a baseline measured, in the same
+  test, with the output alone (the callback's cost is printed).
+* The JACK server killed and restarted: the input reports ``lost``, then ``open`` again, and
+  carries the counter sample-exact again, while the output comes back too (one process:
+  ``vibsynth`` in a child with its own private server, so this one's libjack stays clean).
+
+Run: ``scripts/with_jack.sh -- .venv/bin/python -m pytest tests/e2e/test_input_jack_e2e.py -q -s``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.e2e.jackutil import (
+    COUNTER_PERIOD,
+    JackPlayer,
+    counter_frames,
+    portaudio_input_ports,
+    portaudio_output_ports,
+)
+from tests.e2e.test_device_loss_e2e import DETECT_WITHIN_S, RESUME_WITHIN_S, JackServer, unavailable
+from vibsynth.app.service import build_engine
+from vibsynth.engine.inputs import SoundDeviceInput
+from vibsynth.engine.outputs import SoundDeviceOutput
+from vibsynth.settings.config import load_config
+
+pytestmark = pytest.mark.e2e
+
+ROOT = Path(__file__).resolve().parents[2]
+FS = 48000
+#: Underflows an input window may have above the output-only baseline: PortAudio counts the
+#: dummy driver's own late wake-ups on a shared VM as underflows (0-2 per 10 s).
+SLACK = 3
+WINDOW_S = float(os.environ.get("VIBSYNTH_INPUT_WINDOW_S", "5"))
+
+
+def counter_errors(x: np.ndarray) -> tuple[int, int]:
+    """(steps checked, steps that are not +1 frame) of a received counter, per channel; from its first sample on."""
+    checked = bad = 0
+    for k in range(x.shape[1]):
+        frames = counter_frames(x[:, k], k)
+        steps = np.diff(frames) % COUNTER_PERIOD
+        checked += steps.size
+        bad += int(np.count_nonzero(steps != 1))
+    return checked, bad
+
+
+class Reader(threading.Thread):
+    """Reads an input's ring every few ms, as the follow worker will."""
+
+    def __init__(self, inp: SoundDeviceInput) -> None:
+        super().__init__(daemon=True)
+        self.inp = inp
+        self.blocks: list[np.ndarray] = []
+        self.stop = threading.Event()
+        self.keep = True
+
+    def run(self) -> None:
+        while not self.stop.wait(0.005):
+            x = self.inp.ring.read()
+            if self.keep and x.shape[0]:
+                self.blocks.append(x)
+
+    def data(self) -> np.ndarray:
+        return np.concatenate(self.blocks) if self.blocks else np.zeros((0, self.inp.ring.channels), np.float32)
+
+
+@pytest.fixture(scope="module")
+def config(tmp_path_factory):
+    cache = tmp_path_factory.mktemp("bank-cache")
+    return load_config(overrides={"audio": {"rate": FS, "block_size": 128}, "bank": {"cache_dir": str(cache)}}).settings
+
+
+@pytest.fixture
+def output(jack_server, config):
+    engine = build_engine(config)
+    out = SoundDeviceOutput(engine, host_api="JACK", block_size=128, latency="low")
+    out.start()
+    yield out
+    out.stop()
+
+
+def test_input_ports_stand_beside_the_output_and_carry_a_signal_sample_exact(output):
+    inp = SoundDeviceInput("system:1,2", fs=FS, host_api="JACK", block_size=128)
+    inp.open_ports()
+    try:
+        ports = subprocess.run(["jack_lsp"], capture_output=True, text=True, check=True).stdout.split()
+        assert {"PortAudio:in_0", "PortAudio:in_1"} <= set(ports), ports
+        assert [p for p in ports if p.startswith("PortAudio:out_")], "the output's ports are in the same client"
+        with JackPlayer(n_ports=2) as player:
+            targets = portaudio_input_ports(player.client)
+            assert targets == ["PortAudio:in_0", "PortAudio:in_1"]
+            assert portaudio_output_ports(player.client)  # the output's, beside them
+            player.connect(targets)
+            player.play()
+            inp.open()
+            reader = Reader(inp)
+            reader.start()
+            time.sleep(3.0)
+            reader.stop.set()
+            reader.join()
+            x = reader.data()
+            gaps = player.gaps
+        status = inp.status()
+        first = np.argmax(np.any(x != 0, axis=1))  # before the player's first cycle: silence
+        checked, bad = counter_errors(x[first:])
+        stamp = inp.ring.stamp()
+        print(
+            f"\ninput: {x.shape[0]} frames read in 3 s, {checked} counter steps checked, {bad} wrong, player gaps "
+            f"{gaps}; overflows {status['overflows']}, dropped {status['dropped_frames']}, PortAudio input "
+            f"overflows {status['input_overflows']}; callback load {100 * status['callback_load']:.3f} % of the "
+            f"period; last block: ADC {stamp.adc_time:.6f} s, callback {stamp.current_time:.6f} s "
+            f"(capture latency {1000 * (stamp.current_time - stamp.adc_time):.2f} ms)"
+        )
+        assert x.shape[0] > 2.5 * FS and checked > 2 * 2.5 * FS
+        if gaps == 0:  # a cycle the Python player missed is a hole in the instrument, not the input
+            assert bad == 0
+        assert status["overflows"] == status["dropped_frames"] == 0
+        assert status["state"] == "open" and status["level_db"] == pytest.approx(-6.02, abs=0.01)
+    finally:
+        inp.close()
+    assert inp.status()["state"] == "closed"
+    assert output.state == "streaming"
+
+
+def test_an_input_beside_the_output_adds_no_underflows(output):
+    engine = output.engine
+    time.sleep(0.5)  # past the start-up blocks
+    u0 = engine.stats.underflows
+    time.sleep(WINDOW_S)
+    baseline = engine.stats.underflows - u0
+
+    inp = SoundDeviceInput("system:1,2", fs=FS, host_api="JACK", block_size=128)
+    inp.open()
+    reader = Reader(inp)
+    reader.keep = False
+    reader.start()
+    try:
+        time.sleep(0.5)
+        u1, c1 = engine.stats.underflows, inp.ring.callbacks
+        inp.ring.take_load_peak()
+        time.sleep(WINDOW_S)
+        with_input = engine.stats.underflows - u1
+        callbacks = inp.ring.callbacks - c1
+        load_avg, load_peak = inp.ring.load_avg, inp.ring.take_load_peak()
+    finally:
+        reader.stop.set()
+        reader.join()
+        inp.close()
+    period_us = 1e6 * 128 / FS
+    print(
+        f"\nunderflows per {WINDOW_S:g} s: output alone {baseline}, with a 2-channel input {with_input}; input "
+        f"callbacks {callbacks}, overflows {inp.ring.overflows}; input callback {load_avg * period_us:.2f} us per "
+        f"128-frame block on average ({100 * load_avg:.3f} % of the period), peak {load_peak * period_us:.1f} us"
+    )
+    assert with_input <= baseline + SLACK, f"baseline {baseline}, with the input {with_input}"
+    assert inp.ring.overflows == 0 and callbacks > 0.9 * WINDOW_S * FS / 128
+
+
+# ---------------------------------------------------------------------- server death
+_CHILD = r"""
+import json, sys, threading, time
+import numpy as np
+sys.path.insert(0, sys.argv[2])
+from tests.e2e.jackutil import JackPlayer, portaudio_input_ports
+from tests.e2e.test_input_jack_e2e import counter_errors
+from vibsynth.app.service import build_engine
+from vibsynth.engine.inputs import SoundDeviceInput
+from vibsynth.engine.outputs import SoundDeviceOutput
+from vibsynth.engine.supervisor import hard_exit
+from vibsynth.settings.config import load_config
+
+cfg = load_config(overrides={"audio": {"rate": 48000, "block_size": 128}, "bank": {"cache_dir": sys.argv[1]}}).settings
+engine = build_engine(cfg)
+out = SoundDeviceOutput(engine, host_api="JACK", block_size=128)
+out.start()
+inp = SoundDeviceInput("system:1,2", fs=48000, host_api="JACK", block_size=128)
+inp.open()
+lock = threading.Lock()
+got = []
+player = [None]
+players = []
+
+def read():
+    while True:
+        x = inp.ring.read()
+        if x.shape[0]:
+            with lock:
+                got.append(x)
+        time.sleep(0.005)
+
+def commands():
+    for line in sys.stdin:
+        cmd = line.strip()
+        if cmd == "play":  # an earlier player may be on a dead server: kept, never called again
+            p = JackPlayer(n_ports=2)
+            p.connect(portaudio_input_ports(p.client))
+            with lock:
+                got.clear()
+            p.play()
+            player[0] = p
+            players.append(p)
+        elif cmd == "check":
+            with lock:
+                x = np.concatenate(got) if got else np.zeros((0, 2), np.float32)
+            nz = np.flatnonzero(np.any(x != 0, axis=1))
+            checked, bad = counter_errors(x[nz[0]:]) if nz.size else (0, 0)
+            print(json.dumps({"check": [int(checked), int(bad), player[0].gaps if player[0] else -1]}), flush=True)
+        elif cmd == "quit":
+            hard_exit(0)
+
+threading.Thread(target=read, daemon=True).start()
+threading.Thread(target=commands, daemon=True).start()
+while True:
+    s = inp.status()
+    print(json.dumps({"t": time.monotonic(), "output": out.state, "input": s["state"], "reason": s["reason"],
+                      "frames": s["frames"], "engine_frames": engine.frame_position,
+                      "recovered_after_s": s["recovered_after_s"]}), flush=True)
+    time.sleep(0.02)
+"""
+
+
+class Child:
+    """The vibsynth side (output + input + a reader) in its own process; JSON lines out, commands in."""
+
+    def __init__(self, env: dict[str, str], cache: Path, log: Path) -> None:
+        self.log = log
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", _CHILD, str(cache), str(ROOT)],
+            cwd=ROOT,
+            env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=open(log, "w"),  # noqa: SIM115 - closed with the process
+            text=True,
+        )
+        self.lines: queue.Queue[dict] = queue.Queue()
+        self.last: dict = {}
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            try:
+                self.lines.put(json.loads(line))
+            except json.JSONDecodeError:
+                pass
+
+    def send(self, cmd: str) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(cmd + "\n")
+        self.proc.stdin.flush()
+
+    def wait(self, predicate, timeout: float, what: str) -> tuple[dict, float]:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                line = self.lines.get(timeout=0.1)
+            except queue.Empty:
+                if self.proc.poll() is not None:
+                    break
+                continue
+            if "t" in line:
+                self.last = line
+            if predicate(line):
+                return line, time.monotonic()
+        raise AssertionError(f"{what}: not seen in {timeout:g} s; last {self.last}\n{self.log.read_text()[-3000:]}")
+
+    def check(self) -> tuple[int, int, int]:
+        self.send("check")
+        line, _ = self.wait(lambda d: "check" in d, 10.0, "a counter check")
+        return tuple(line["check"])
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                self.send("quit")
+                self.proc.wait(timeout=5)
+            except (OSError, subprocess.TimeoutExpired):
+                self.proc.kill()
+                self.proc.wait()
+
+
+@pytest.fixture
+def private_jack(tmp_path):
+    for tool in ("jackd", "jack_wait"):
+        if shutil.which(tool) is None:
+            unavailable(f"{tool} not found (Debian package jackd2)")
+    try:
+        import jack as _jack  # noqa: F401
+    except Exception as exc:  # noqa: BLE001 - JACK-Client or libjack missing
+        unavailable(f"JACK-Client is not usable ({exc})")
+    server = JackServer(f"vibsynth-input-loss-{os.getpid()}", tmp_path / "jackd.log")
+    server.start()
+    yield server
+    server.stop()
+
+
+def test_input_reports_a_dead_server_and_recovers_with_the_output(private_jack, tmp_path, config):
+    child = Child(dict(private_jack.env, PYTHONPATH=str(ROOT)), Path(config.bank.cache_dir), tmp_path / "child.log")
+    try:
+        child.wait(lambda d: d.get("input") == "open" and d.get("output") == "streaming", 120.0, "both streaming")
+        child.send("play")
+        time.sleep(1.0)
+        checked, bad, gaps = child.check()
+        assert checked > 48000 and (bad == 0 or gaps > 0), (checked, bad, gaps)
+
+        killed = private_jack.kill()
+        line, seen = child.wait(lambda d: d.get("input") in ("lost", "retrying"), 5.0, "the input lost")
+        detect = seen - killed
+        assert line["reason"] == "JACK server shut down"
+        child.wait(lambda d: d.get("output") == "device lost", 5.0, "the output lost")
+        time.sleep(2.0)
+        assert child.last["input"] in ("lost", "retrying")
+
+        back = private_jack.start()
+        line, seen = child.wait(
+            lambda d: d.get("input") == "open" and d.get("output") == "streaming", RESUME_WITHIN_S + 5.0, "both back"
+        )
+        resumed = seen - back
+        frames = line["frames"]
+        line, _ = child.wait(lambda d: d.get("frames", 0) > frames + 4800, 5.0, "input frames flowing again")
+        engine_frames = line["engine_frames"]
+        child.wait(lambda d: d.get("engine_frames", 0) > engine_frames + 4800, 5.0, "the output rendering again")
+        child.send("play")  # a new player on the new server, into the reopened input's new ports
+        time.sleep(1.0)
+        checked2, bad2, gaps2 = child.check()
+        print(
+            f"\nJACK killed -> input 'lost' in {1000 * detect:.0f} ms; server back -> input and output open again in "
+            f"{resumed:.2f} s (input's own recovery: {line['recovered_after_s']:.2f} s after the loss); counter "
+            f"before {checked} steps, {bad} wrong; after {checked2} steps, {bad2} wrong (player gaps {gaps2})"
+        )
+        assert detect < DETECT_WITHIN_S and resumed < RESUME_WITHIN_S
+        assert checked2 > 48000 and (bad2 == 0 or gaps2 > 0), (checked2, bad2, gaps2)
+        log = child.log.read_text()
+        assert "audio input device lost: JACK server shut down" in log and "audio input device back" in log
+        assert "Traceback" not in log
+    finally:
+        child.close()
