@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import socket
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -11,9 +14,11 @@ from tests.control.osc.fakes import make_controller
 from vibsynth.control.osc.codec import decode_packet, encode_message
 from vibsynth.control.osc.server import OscServer
 from vibsynth.control.osc.transport import (
+    RECEIVE_PRIORITY,
     FramingDetector,
     LengthPrefixDecoder,
     SlipDecoder,
+    UdpTransport,
     length_encode,
     slip_encode,
 )
@@ -103,5 +108,126 @@ def test_server_answers_each_connection_in_its_own_framing(framing):
             reply = _request(conn, encode(encode_message("/vibsynth/ch/2/intensity", (0.5,))), decoder)
             msg = decode_packet(reply)
             assert msg.address == "/vibsynth/error" and "channel 2 out of range" in msg.args[1]
+    finally:
+        server.stop()
+
+
+# ---------------------------------------------------------------------- the UDP receive thread's scheduling
+def _fifo_allowed() -> bool:
+    """Whether this process may put a thread under SCHED_FIFO (root, CAP_SYS_NICE or RLIMIT_RTPRIO)."""
+    if not hasattr(os, "sched_setscheduler"):
+        return False
+    result = []
+
+    def probe() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+            result.append(True)
+        except OSError:
+            result.append(False)
+
+    t = threading.Thread(target=probe)
+    t.start()
+    t.join()
+    return result[0]
+
+
+needs_fifo = pytest.mark.skipif(not _fifo_allowed(), reason="SCHED_FIFO not allowed here")
+
+
+class _Batches:
+    """on_batch for a bare UdpTransport: records each batch's data and the thread's policy then."""
+
+    def __init__(self) -> None:
+        self.data: list[bytes] = []
+        self.policies: list[int] = []
+        self.event = threading.Event()
+
+    def __call__(self, batch: list) -> None:
+        self.policies.append(os.sched_getscheduler(0))
+        self.data.extend(data for data, _peer in batch)
+        self.event.set()
+
+
+def _send_and_wait(udp: UdpTransport, batches: _Batches, data: bytes) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.sendto(data, ("127.0.0.1", udp.port))
+    assert batches.event.wait(5.0), "the datagram never reached the handler"
+    batches.event.clear()
+
+
+def _policy_of(udp: UdpTransport) -> tuple[int, int]:
+    assert udp._thread is not None and udp._thread.native_id is not None
+    tid = udp._thread.native_id
+    return os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority
+
+
+def _wait_policy(udp: UdpTransport, policy: int) -> tuple[int, int]:
+    deadline = time.monotonic() + 5.0
+    while _policy_of(udp)[0] != policy and time.monotonic() < deadline:
+        time.sleep(0.005)
+    return _policy_of(udp)
+
+
+@needs_fifo
+def test_the_receive_loop_waits_under_real_time_scheduling_and_python_runs_normally():
+    batches = _Batches()
+    udp = UdpTransport("127.0.0.1", 0, batches)
+    main_policy = os.sched_getscheduler(0)
+    udp.start()
+    try:
+        assert udp.realtime
+        # waiting for a datagram: SCHED_FIFO at the receive priority, this (main) thread unchanged
+        assert _policy_of(udp) == (os.SCHED_FIFO, RECEIVE_PRIORITY)
+        assert os.sched_getscheduler(0) == main_policy
+        message = encode_message("/vibsynth/ping", [7])
+        _send_and_wait(udp, batches, message)
+        assert batches.data == [message]
+        # the Python handler ran normally scheduled, and the loop is real-time again afterwards
+        assert batches.policies == [os.SCHED_OTHER]
+        assert _wait_policy(udp, os.SCHED_FIFO) == (os.SCHED_FIFO, RECEIVE_PRIORITY)
+        _send_and_wait(udp, batches, message)
+        assert batches.policies == [os.SCHED_OTHER, os.SCHED_OTHER] and len(batches.data) == 2
+    finally:
+        udp.stop()
+
+
+def test_priority_0_keeps_the_receive_loop_normally_scheduled():
+    batches = _Batches()
+    udp = UdpTransport("127.0.0.1", 0, batches, priority=0)
+    udp.start()
+    try:
+        assert not udp.realtime
+        assert _policy_of(udp)[0] == os.SCHED_OTHER
+        _send_and_wait(udp, batches, b"/x\0\0,\0\0\0")
+        assert batches.data == [b"/x\0\0,\0\0\0"] and batches.policies == [os.SCHED_OTHER]
+    finally:
+        udp.stop()
+
+
+def test_a_refused_real_time_priority_leaves_a_working_normally_scheduled_loop(monkeypatch):
+    def refuse(pid, policy, param):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    batches = _Batches()
+    udp = UdpTransport("127.0.0.1", 0, batches)
+    udp.start()
+    try:
+        assert not udp.realtime
+        assert _policy_of(udp)[0] == os.SCHED_OTHER
+        _send_and_wait(udp, batches, b"/x\0\0,\0\0\0")
+        assert batches.data == [b"/x\0\0,\0\0\0"]
+    finally:
+        udp.stop()
+
+
+@needs_fifo
+def test_the_server_banner_says_the_receive_thread_is_real_time():
+    server = OscServer(make_controller(), port=0)
+    server.start()
+    try:
+        assert server.udp.realtime
+        assert f"real-time receive thread (SCHED_FIFO {RECEIVE_PRIORITY})" in server.describe()
     finally:
         server.stop()

@@ -202,6 +202,8 @@ class OscServer:
             text += f" and tcp://{host}:{self.udp.port} (SLIP or length-prefixed)"
         if self.udp.rcvbuf:
             text += f", receive buffer {self.udp.rcvbuf // 1024} KiB"
+        if self.udp.realtime:
+            text += f", real-time receive thread (SCHED_FIFO {self.udp.priority})"
         if host not in _LOOPBACK:
             text += ", reachable from the network" + (" (allow-list)" if self.udp.allow else "")
         return text

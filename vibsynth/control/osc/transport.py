@@ -7,7 +7,11 @@ thread drains whatever else is already queued in the socket (up to 256 datagrams
 so the handler can coalesce moves that arrived together. The UDP receive loop is
 compiled (:mod:`vibsynth.control.osc._fast`): it runs without the GIL and, when the
 OSC server gives it a fast path (:mod:`vibsynth.control.osc.fast`), puts the common knob
-messages straight into the engine's command ring. ``peer.send(data)`` replies to the sender (UDP:
+messages straight into the engine's command ring. That loop runs under real-time scheduling
+(SCHED_FIFO at :data:`RECEIVE_PRIORITY`, below the audio threads) where the system allows it,
+so a datagram wakes it at once even when every core is busy, and before the next block
+starts; the thread drops to normal scheduling while Python handles a batch, so a flood of
+messages for Python competes for the processor like any other work. ``peer.send(data)`` replies to the sender (UDP:
 its address, or the configured reply port on its host; TCP: the same connection).
 
 Limits: TCP connections are bounded (:data:`TCP_MAX_CONNECTIONS` in all,
@@ -20,6 +24,7 @@ in the config, so a config that passes always starts the server.
 from __future__ import annotations
 
 import logging
+import os
 import selectors
 import socket
 import threading
@@ -47,6 +52,7 @@ __all__ = [
     "TCP_MAX_PER_PEER",
     "TCP_IDLE_TIMEOUT_S",
     "DEFAULT_RCVBUF",
+    "RECEIVE_PRIORITY",
 ]
 
 log = logging.getLogger(__name__)
@@ -62,6 +68,31 @@ TCP_MAX_PER_PEER: int = Osc.model_fields["tcp_max_per_peer"].default
 TCP_IDLE_TIMEOUT_S: float = Osc.model_fields["tcp_idle_timeout_s"].default
 """A TCP connection without a complete packet for this long is closed (``osc.tcp_idle_timeout_s``)."""
 _POLL_S = 0.25
+
+RECEIVE_PRIORITY = 1
+"""SCHED_FIFO priority of the UDP receive loop: above every normally scheduled thread, below
+JACK's and PortAudio's audio threads (0 = normal scheduling)."""
+
+
+def _realtime(priority: int) -> bool:
+    """Put the calling thread under SCHED_FIFO ``priority``; False where not allowed or not POSIX."""
+    setter = getattr(os, "sched_setscheduler", None)
+    if setter is None or priority <= 0:
+        return False
+    try:
+        setter(0, os.SCHED_FIFO, os.sched_param(priority))  # pid 0: this thread (Linux)
+    except (OSError, ValueError):  # no CAP_SYS_NICE / RLIMIT_RTPRIO, or not supported
+        return False
+    return True
+
+
+def _normal() -> bool:
+    """Put the calling thread back under normal scheduling (SCHED_OTHER)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except OSError:
+        return False
+    return True
 
 
 BatchHandler = Callable[[list], None]
@@ -303,6 +334,10 @@ class UdpTransport:
         ``factory(fd, on_datagrams, allow) -> receiver`` building the compiled receive loop
         (:func:`vibsynth.control.osc.fast.make_receiver`; the OSC server passes one with the
         fast path on). Default: the loop without a fast path.
+    priority : int
+        SCHED_FIFO priority of the receive loop (:data:`RECEIVE_PRIORITY`; 0 = normal
+        scheduling). Where the system refuses it the loop runs normally scheduled; after
+        :meth:`start`, :attr:`realtime` says which.
     """
 
     def __init__(
@@ -316,12 +351,16 @@ class UdpTransport:
         rcvbuf: int = DEFAULT_RCVBUF,
         stats: TransportStats | None = None,
         receiver_factory: ReceiverFactory | None = None,
+        priority: int = RECEIVE_PRIORITY,
     ) -> None:
         self.host = host
         self.port = int(port)
         self.on_batch = on_batch
         self.allow = allow
         self.reply_port = reply_port
+        self.priority = int(priority)
+        self.realtime = False  # the receive loop runs under SCHED_FIFO (known after start())
+        self._scheduled = threading.Event()
         self.requested_rcvbuf = rcvbuf
         self.rcvbuf = 0
         self.stats = stats or TransportStats()
@@ -361,8 +400,10 @@ class UdpTransport:
         self._stop.clear()
         assert self.sock is not None
         self._receiver = self.receiver_factory(self.sock.fileno(), self._on_datagrams, self.allow)
+        self._scheduled.clear()
         self._thread = threading.Thread(target=self._run, name="vibsynth-osc-udp", daemon=True)
         self._thread.start()
+        self._scheduled.wait(2.0)  # so that :attr:`realtime` is known when start() returns
 
     def stop(self) -> None:
         """Stop the receive thread (within 0.1 s) and close the socket."""
@@ -393,6 +434,8 @@ class UdpTransport:
         sock = self.sock
         assert sock is not None
         receiver = self._receiver
+        self.realtime = _realtime(self.priority)
+        self._scheduled.set()
         if receiver is not None:
             receiver.run()  # the compiled loop; returns after stop()
 
@@ -402,16 +445,22 @@ class UdpTransport:
         return receiver.counters() if receiver is not None else {}
 
     def _on_datagrams(self, items: list[tuple[bytes, tuple[str, int]]]) -> None:
-        """Datagrams the compiled loop hands to Python (in arrival order), on the receive thread."""
-        batch = []
-        for data, address in items:
-            reply_to = address if self.reply_port is None else (address[0], self.reply_port)
-            batch.append((data, UdpPeer(address, reply_to, self)))
+        """Datagrams the compiled loop hands to Python (in arrival order), on the receive thread,
+        which runs normally scheduled meanwhile (the real-time priority is for the compiled loop)."""
+        demoted = self.realtime and _normal()
         try:
-            self.on_batch(batch)
-        except Exception:  # the receive thread must survive anything
-            self.stats.handler_errors += 1
-            log.exception("OSC: handler failed on a batch of %d packet(s)", len(batch))
+            batch = []
+            for data, address in items:
+                reply_to = address if self.reply_port is None else (address[0], self.reply_port)
+                batch.append((data, UdpPeer(address, reply_to, self)))
+            try:
+                self.on_batch(batch)
+            except Exception:  # the receive thread must survive anything
+                self.stats.handler_errors += 1
+                log.exception("OSC: handler failed on a batch of %d packet(s)", len(batch))
+        finally:
+            if demoted:
+                _realtime(self.priority)
 
 
 # ---------------------------------------------------------------------- TCP
