@@ -1,16 +1,20 @@
 #!/usr/bin/env python3
 """Peers benchmark (issue 12): vibsynth against scsynth and pyo on the same job.
 
-    python benchmarks/bench_peers.py                          # all three, 10 s phases, 50 trials
-    python benchmarks/bench_peers.py --seconds 10 --only vibsynth
+    python benchmarks/bench_peers.py                          # all three, ~8 min
+    python benchmarks/bench_peers.py --idle-trials 200 --trials 0 --seconds 2   # a quick look
     python benchmarks/bench_peers.py --only scsynth,pyo --trials 20 --json /tmp/p.json
-    python benchmarks/bench_peers.py --only vibsynth --vibsynth-rev HEAD   # the last commit, not the tree
+    python benchmarks/bench_peers.py --vibsynth-rev HEAD      # vibsynth of the last commit, not the tree
+    python benchmarks/bench_peers.py --vibsynth-src /tmp/vs   # vibsynth from a built source folder
 
 No wrapper is needed: every peer gets its own private JACK server on the dummy driver
 (``jackd -n bench-peers-<peer> -R -d dummy -r 48000 -p 128``, without ``-R`` when real-time
 scheduling is refused; ``JACK_NO_AUDIO_RESERVATION=1``), started and stopped by this script.
-Needs jackd2 and the JACK-Client module (both already needed by the e2e tests); a peer that is
-not installed is skipped with a message.
+The peers run at the same time, each on its own server; the JACK clients that watch and
+record a server live in a child process per server (``_jack_agent``: libjack serves one
+server per process). Needs jackd2 and the JACK-Client module (both already needed by the e2e
+tests); a peer that is not installed is skipped with a message (scsynth: Debian
+``supercollider-server``; pyo: ``pip install pyo`` into the venv).
 
 The job, one channel, 48 kHz, JACK period 128:
 
@@ -36,9 +40,14 @@ band-pass on white noise has power proportional to its bandwidth, so the gain in
 M_k - 10 log10(f_k / f_0), normalised to a maximum of 1): approximately vibsynth's texture at
 balance 0. The per-sample work does not depend on the gains.
 
-Per peer, two phases, each ``--seconds`` of measurement followed by ``--trials`` latency trials:
+All peers start, then, every peer streaming all along:
 
-* **idle**: streaming at a steady loud level, no control traffic;
+* **idle**: per peer in turn, ``--seconds`` of streaming at a steady loud level, no control
+  traffic; then the idle latency trials of all peers **interleaved**: ``--idle-trials`` (800)
+  rounds, each one trial of every peer in a fresh random order, so machine load (the VM is
+  shared) hits every peer alike;
+* **flood**: per peer in turn, ``--seconds`` of measurement then ``--trials`` (50) latency
+  trials under the flood:
 * **flood**: a separate sender process sends ``--rate`` (10,000) OSC messages/s over UDP to the
   target, in 1 ms bursts: scsynth ``/n_set <node> "g<k>" <v>``, pyo ``/peer/g/<k> f <v>``
   (k cycling over the 30 bands, values alternating), vibsynth ``/vibsynth/balance f <v>``
@@ -60,16 +69,32 @@ Measures, per phase:
   starts. For vibsynth also ``underflows`` from ``/vibsynth/status`` over the window (PortAudio
   flags every xrun of the server, including the capture client's during the trials).
 * **latency**: as benchmarks/bench_osc.py: a JACK client on the same server records the
-  target's output port; each trial sends "silence" (amp 0 / intensity 0), waits 0.1 s, notes
-  the time, sends "loud", waits 0.1 s; latency = time of the first captured sample with
-  |x| > 1e-7 minus the send time. Times are CLOCK_MONOTONIC (each captured sample gets the
-  actual start time of its JACK cycle, from ``frames_since_cycle_start``, plus its offset);
-  the JACK frame clock of bench_osc.py is also recorded (``--latency-clock frame``), but its
-  estimate ``jack_frame_time()`` drifts by tens of ms after the dummy driver wakes late, which
-  happens on a busy VM. Median and p95 over the trials. A trial can be <= 0 when the target's
-  cycle ran late and still took a message sent after that cycle's nominal start.
+  target's output port; each trial sends "silence" (amp 0 / intensity 0), waits ``--gap``
+  (0.05 s), notes the time, sends "loud", waits ``--gap``; latency = time of the first
+  captured sample with |x| > 1e-7 minus the send time. A message waits for the target's next
+  cycle, a wait uniform over one period (2.67 ms), so a median of n trials is known to about
+  +-1.96 x 2.67 / (2 sqrt(n)) ms: +-0.19 ms for 30 trials, +-0.09 ms for 800. The idle trials
+  therefore (``--phase stratified``) send at a chosen fraction of the cycle before a cycle
+  start (predicted from the capture's last cycle), the same fraction for every peer of a round
+  and the rounds' fractions spread evenly over the cycle: the wait, the same for any engine,
+  then cancels out of the comparison. Each trial also records ``wait`` (send -> the next cycle
+  start, measured) and which cycle took the message (the one running at the send, the next, or
+  a later one: missed), and ``excess`` = latency - wait: an engine that applies every message
+  at the next cycle start has excess 0; a receive thread that wakes too late for it misses a
+  cycle (excess one period). Printed: per peer the median with its 95 % order-statistic
+  interval; vibsynth's median over the better peer's (the lower median) as a ratio and a
+  difference, and the difference of mean excess, with 95 % intervals from a bootstrap that
+  resamples whole rounds (peers paired by round, so shared load stays paired). Times are
+  CLOCK_MONOTONIC (each captured sample gets the actual start time of its JACK cycle, from
+  ``frames_since_cycle_start``, plus its offset); the JACK frame clock of bench_osc.py is also
+  recorded (``--latency-clock frame``), but its estimate ``jack_frame_time()`` drifts by tens
+  of ms after the dummy driver wakes late, which happens on a busy VM. A trial can be <= 0
+  when the target's cycle ran late and still took a message sent after that cycle's nominal
+  start.
+* **load**: the load average and the whole machine's busy % over the interleaved trials (and
+  per round), in the table and the JSON.
 
-Prints a table and writes JSON (machine, JACK settings, versions) to
+Prints tables and writes JSON (machine, JACK settings, versions, every idle trial) to
 benchmarks/results/peers.json. With ``--only``, the other peers' entries already in that file
 are kept (each entry has its own date and machine info); ``--no-merge`` drops them.
 
@@ -91,7 +116,6 @@ import re
 import shutil
 import signal
 import socket
-import statistics
 import struct
 import subprocess
 import sys
@@ -101,6 +125,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from peers_stats import median_ci, paired_bootstrap, round_matrix
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_JSON = ROOT / "benchmarks" / "results" / "peers.json"
@@ -112,7 +137,6 @@ CENTRES = [10.0 * 100.0 ** (k / (N_BANDS - 1)) for k in range(N_BANDS)]
 _R = 100.0 ** (1.0 / (N_BANDS - 1))  # ratio between adjacent centres
 RQ = math.sqrt(_R) - 1.0 / math.sqrt(_R)  # (upper - lower midpoint) / centre = 0.159
 SILENT_THRESHOLD = 1e-7
-LAT_GAP_S = 0.1
 SC_NODE = 1000
 SC_DEF_NAME = "vibsynth_peer_bands"
 PYO_AMP = "/peer/amp"
@@ -327,14 +351,14 @@ def peer_synthdef() -> bytes:
 _CHILDREN: list[subprocess.Popen] = []
 
 
-def spawn(cmd: list[str], *, env: dict, log: Path, stdout=None, cwd: Path = ROOT) -> subprocess.Popen:
+def spawn(cmd: list[str], *, env: dict, log: Path, stdout=None, stdin=None, cwd: Path = ROOT) -> subprocess.Popen:
     """Start a child in its own session (Ctrl-C reaches only us; we stop it in order) that
     also gets SIGTERM if this process dies without cleaning up (setpriv --pdeathsig)."""
     if shutil.which("setpriv"):
         cmd = ["setpriv", "--pdeathsig", "TERM", "--", *cmd]
     fh = open(log, "ab")
     proc = subprocess.Popen(
-        cmd, env=env, stdout=stdout or fh, stderr=fh, stdin=subprocess.DEVNULL, start_new_session=True, cwd=cwd
+        cmd, env=env, stdout=stdout or fh, stderr=fh, stdin=stdin or subprocess.DEVNULL, start_new_session=True, cwd=cwd
     )
     fh.close()
     _CHILDREN.append(proc)
@@ -475,23 +499,32 @@ class Monitor:
 
 
 class Capture:
-    """A JACK client recording one port into numpy once armed (frame-clock stamped)."""
+    """A JACK client recording one port into numpy while armed (stamped per sample and per cycle).
+
+    One client stays connected for many trials: :meth:`reset` rewinds it (while disarmed).
+    """
 
     def __init__(self, server: str, source: str, seconds: float) -> None:
         import jack
 
         self.client = jack.Client("peers-capture", servername=server, no_start_server=True)
         self.rate = int(self.client.samplerate)
+        self.period = int(self.client.blocksize)
+        cycles = int(seconds * self.rate) // self.period + 1
         self.port = self.client.inports.register("in_1")
-        self.data = np.zeros(int(seconds * self.rate), dtype=np.float32)
+        self.data = np.zeros(cycles * self.period, dtype=np.float32)
         # JACK frame time of every captured sample: a cycle the capture client misses (an
         # xrun) leaves a gap in ``data`` but not in the mapping from send frames to samples.
         self.frame_of = np.zeros(self.data.shape[0], dtype=np.int64)
         # CLOCK_MONOTONIC time (ns) of every captured sample: the cycle's actual start (the
         # callback's entry minus JACK's frames_since_cycle_start) plus the sample's offset.
         self.ns_of = np.zeros(self.data.shape[0], dtype=np.int64)
+        # per captured cycle: its actual start (ns) and its first sample in ``data``
+        self.cycle_ns = np.zeros(cycles, dtype=np.int64)
+        self.cycle_first = np.zeros(cycles, dtype=np.int64)
         self._ramp = np.arange(8192, dtype=np.int64)
         self.frames = 0
+        self.cycles = 0
         self.start_frame: int | None = None
         self.armed = False
         self.client.set_process_callback(self._process)
@@ -503,7 +536,7 @@ class Capture:
             return
         pos = self.frames
         n = min(frames, self.data.shape[0] - pos)
-        if n <= 0:
+        if n <= 0 or self.cycles >= self.cycle_ns.shape[0]:
             return
         now = time.monotonic_ns()
         first = self.client.last_frame_time
@@ -513,7 +546,14 @@ class Capture:
         self.data[pos : pos + n] = self.port.get_array()[:n]
         self.frame_of[pos : pos + n] = first + self._ramp[:n]
         self.ns_of[pos : pos + n] = begin + self._ramp[:n] * 1_000_000_000 // self.rate
+        self.cycle_ns[self.cycles] = begin
+        self.cycle_first[self.cycles] = pos
+        self.cycles += 1
         self.frames = pos + n
+
+    def reset(self) -> None:
+        """Rewind to empty (call while disarmed)."""
+        self.frames, self.cycles, self.start_frame = 0, 0, None
 
     def frame_now(self) -> int:
         return int(self.client.frame_time)
@@ -529,6 +569,150 @@ class Capture:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class JackAgent:
+    """The :class:`Monitor` and :class:`Capture` of one JACK server, run in a child process.
+
+    libjack (JACK2) serves one server per process, and the peers' servers run at the same time
+    (their latency trials are interleaved), so each server's clients live in their own
+    ``bench_peers.py _jack_agent`` child, driven by one JSON line per request on its stdin.
+    Capture times are CLOCK_MONOTONIC, the clock of the sends in this process.
+    """
+
+    def __init__(self, jackd: JackServer, logdir: Path) -> None:
+        cmd = [sys.executable, str(Path(__file__).resolve()), "_jack_agent", "--server", jackd.name]
+        self.proc = spawn(
+            cmd, env=jackd.env, log=logdir / f"agent-{jackd.name}.log", stdout=subprocess.PIPE, stdin=subprocess.PIPE
+        )
+        self.call("hello", timeout=30.0)
+
+    def call(self, op: str, timeout: float = 10.0, **kw) -> dict:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write((json.dumps({"op": op, **kw}) + "\n").encode())
+        self.proc.stdin.flush()
+        deadline = time.monotonic() + timeout
+        while True:
+            line = self.proc.stdout.readline()
+            if not line:
+                raise RuntimeError(f"JACK agent exited ({self.proc.poll()}) during {op}")
+            try:
+                reply = json.loads(line)
+            except ValueError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"JACK agent: no reply to {op}") from None
+                continue  # something libjack printed
+            if isinstance(reply, dict) and "error" in reply:
+                raise RuntimeError(f"JACK agent ({op}): {reply['error']}")
+            return reply
+
+    @property
+    def xruns(self) -> int:
+        return int(self.call("xruns")["xruns"])
+
+    def cpu_load(self) -> float:
+        return float(self.call("cpu_load")["load"])
+
+    def find_output(self) -> str | None:
+        return self.call("find_output")["port"]
+
+    def ensure_playback(self, port: str) -> list[str]:
+        return self.call("ensure_playback", port=port)["connections"]
+
+    def capture_open(self, source: str, seconds: float) -> None:
+        self.call("capture_open", source=source, seconds=seconds)
+
+    def arm(self) -> None:
+        """Rewind the capture and record from now on."""
+        self.call("arm")
+
+    def levels(self) -> dict:
+        """Stop recording; RMS and peak of what was recorded since :meth:`arm`."""
+        return self.call("levels")
+
+    def trial(self, sent_ns: int, gap: float) -> dict:
+        """Stop recording; :func:`analyse_trial` of a send at ``sent_ns`` (CLOCK_MONOTONIC)."""
+        return self.call("trial", sent_ns=sent_ns, gap=gap)
+
+    def capture_close(self) -> None:
+        self.call("capture_close")
+
+    def close(self) -> None:
+        try:
+            self.call("close", timeout=5.0)
+        except (RuntimeError, OSError, ValueError):
+            pass
+        stop(self.proc, timeout=5.0)
+
+
+def jack_agent(argv: list[str]) -> int:
+    """The child of :class:`JackAgent`: one JSON request per stdin line, one JSON reply per line."""
+    p = argparse.ArgumentParser()
+    p.add_argument("--server", required=True)
+    a = p.parse_args(argv)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+    mon = Monitor(a.server)
+    cap: Capture | None = None
+    out = sys.stdout
+    for line in sys.stdin:
+        req = json.loads(line)
+        op = req["op"]
+        reply: dict = {}
+        try:
+            if op == "find_output":
+                reply = {"port": mon.find_output()}
+            elif op == "ensure_playback":
+                reply = {"connections": mon.ensure_playback(req["port"])}
+            elif op == "cpu_load":
+                reply = {"load": mon.cpu_load()}
+            elif op == "xruns":
+                reply = {"xruns": mon.xruns}
+            elif op == "capture_open":
+                cap = Capture(a.server, req["source"], req["seconds"])
+            elif op == "clock":
+                assert cap is not None
+                n = cap.cycles
+                reply = {
+                    "cycle_ns": int(cap.cycle_ns[n - 1]) if n else None,
+                    "period_ns": cap.period * 1e9 / cap.rate,
+                }
+            elif op == "arm":
+                assert cap is not None
+                cap.armed = False
+                cap.reset()
+                cap.armed = True
+            elif op in ("levels", "trial"):
+                assert cap is not None
+                cap.armed = False
+                time.sleep(0.005)  # a callback that saw ``armed`` just before finishes its copy
+                if op == "levels":
+                    x = cap.data[: cap.frames].astype(np.float64)
+                    reply = {
+                        "frames": int(x.size),
+                        "rms": float(np.sqrt(np.mean(x**2))) if x.size else 0.0,
+                        "max_abs": float(np.max(np.abs(x))) if x.size else None,
+                    }
+                else:
+                    # jack_frame_time() at the send: its value now, less the frames since on CLOCK_MONOTONIC
+                    frame_now, ns_now = cap.frame_now(), time.monotonic_ns()
+                    sent_frame = frame_now - round((ns_now - req["sent_ns"]) * cap.rate / 1e9)
+                    reply = analyse_trial(cap, sent_frame, int(req["sent_ns"]), float(req["gap"]))
+            elif op == "capture_close":
+                if cap is not None:
+                    cap.close()
+                cap = None
+            elif op == "close":
+                out.write("{}\n")
+                out.flush()
+                break
+        except Exception as exc:
+            reply = {"error": f"{type(exc).__name__}: {exc}"}
+        out.write(json.dumps(reply) + "\n")
+        out.flush()
+    if cap is not None:
+        cap.close()
+    mon.close()
+    return 0
 
 
 # ------------------------------------------------------------------ the targets
@@ -825,7 +1009,9 @@ def _pct(a: float | None, b: float | None, dt: float) -> float | None:
 
 
 class Snapshot:
-    def __init__(self, target: Target, jackd: JackServer, mon: Monitor, sender: subprocess.Popen | None) -> None:
+    def __init__(
+        self, target: Target, jackd: JackServer, mon: Monitor | JackAgent, sender: subprocess.Popen | None
+    ) -> None:
         self.t = time.monotonic()
         self.cpu = proc_cpu_seconds(target.proc.pid if target.proc else None)
         self.jackd_cpu = proc_cpu_seconds(jackd.proc.pid if jackd.proc else None)
@@ -868,7 +1054,7 @@ def window(a: Snapshot, b: Snapshot, jackd: JackServer, client: str) -> dict:
     return out
 
 
-def baseline(jackd: JackServer, mon: Monitor, seconds: float) -> dict:
+def baseline(jackd: JackServer, mon: Monitor | JackAgent, seconds: float) -> dict:
     """The JACK server with no target: how often the dummy driver itself wakes late here."""
     t0, cpu0, sys0, x0, n0 = (
         time.monotonic(),
@@ -895,100 +1081,177 @@ def baseline(jackd: JackServer, mon: Monitor, seconds: float) -> dict:
     return out
 
 
-def latency_trials(target: Target, server: str, source: str, trials: int) -> dict:
-    """Send -> first changed output sample, per trial, on two clocks (seconds).
+def one_trial(target: Target, agent: JackAgent, gap: float, before_cycle: float | None = None) -> dict:
+    """One latency trial: silence, ``gap`` s, note the time, loud, ``gap`` s; then its analysis.
 
-    ``wall`` (the default): CLOCK_MONOTONIC just before the send vs the actual start of the
-    JACK cycle holding the first non-silent sample, plus the sample's offset in the cycle.
-    ``frame``: as benchmarks/bench_osc.py, ``jack_frame_time()`` just before the send vs the
+    ``before_cycle`` (a fraction of the period, 0..1): send that long before a start of the
+    target's cycle, predicted from the last cycle start the capture saw (None: whenever the gap
+    ends). The interleaved trials give every peer of a round the same fraction (common random
+    numbers) and the rounds' fractions cover the period evenly (stratified), so the wait for the
+    next cycle, the same for every engine, no longer hides their difference. The wait actually
+    met is measured (``wait_s``), not assumed. Returns :func:`analyse_trial`'s dict (``rejected``
+    names the reason when it is not usable).
+    """
+    agent.arm()
+    target.set_loud(False)
+    time.sleep(gap)
+    if before_cycle is not None:
+        clock = agent.call("clock")
+        if clock["cycle_ns"] is not None:
+            start, period = int(clock["cycle_ns"]), float(clock["period_ns"])
+            lead = before_cycle * period
+            k = math.ceil((time.monotonic_ns() + 1_500_000 + lead - start) / period)
+            when = start + k * period - lead
+            time.sleep(max(0.0, (when - time.monotonic_ns()) / 1e9 - 0.0004))
+            while time.monotonic_ns() < when:  # the last 0.4 ms spinning: sleep() wakes tens of us late
+                pass
+    sent_ns = time.monotonic_ns()
+    target.set_loud(True)
+    time.sleep(gap)
+    return agent.trial(sent_ns, gap)
+
+
+def analyse_trial(cap: Capture, sent_frame: int, sent_ns: int, gap: float) -> dict:
+    """Send -> first changed output sample of one trial, on two clocks, and where it fell.
+
+    ``wall_s`` (the default clock): CLOCK_MONOTONIC just before the send vs the actual start of
+    the JACK cycle holding the first non-silent sample, plus the sample's offset in the cycle.
+    ``frame_s``: as benchmarks/bench_osc.py, ``jack_frame_time()`` just before the send vs the
     frame of that sample. ``jack_frame_time()`` is JACK's DLL estimate of the current frame;
     after the dummy driver wakes late it can be off by tens of ms for seconds (seen on the
-    2-core VM), so the trials are located and timed on the wall clock.
+    2-core VM), so trials are located and timed on the wall clock.
+
+    Where the time goes: ``wait_s`` is the time from the send to the start of the next cycle
+    (what any engine that applies a message at the next cycle start must wait), and
+    ``cycles_after`` says which cycle took the message: 0 that next one, -1 the cycle already
+    running at the send (its callback started after the send, late in its cycle), 1 or more a
+    cycle missed (the message reached the audio callback too late for the next one).
+    ``excess_s`` = ``wall_s`` - ``wait_s``.
     """
-    sends: list[tuple[int, int]] = []
-    with Capture(server, source, trials * 2 * LAT_GAP_S * 1.5 + 2.0) as cap:
-        target.set_loud(False)
-        cap.armed = True
-        time.sleep(0.2)
-        for _ in range(trials):
-            target.set_loud(False)
-            time.sleep(LAT_GAP_S)
-            sends.append((cap.frame_now(), time.monotonic_ns()))
-            target.set_loud(True)
-            time.sleep(LAT_GAP_S)
-        time.sleep(LAT_GAP_S)
-        cap.armed = False
-        time.sleep(0.02)
-        rate, frames, period = cap.rate, cap.frames, int(cap.client.blocksize)
-        data, frame_of, ns_of = cap.data[:frames], cap.frame_of[:frames], cap.ns_of[:frames]
-    out: dict = {
-        "frame": [],
-        "wall": [],
-        "rejected": {"outside capture": 0, "not silent before": 0, "no onset": 0},
-        "capture_gaps": int(np.count_nonzero(np.diff(frame_of) != 1)) if frames > 1 else 0,
-    }
-    span = int(LAT_GAP_S * rate)
+    rate, period, frames = cap.rate, cap.period, cap.frames
+    data, frame_of, ns_of = cap.data[:frames], cap.frame_of[:frames], cap.ns_of[:frames]
+    cycle_ns, cycle_first = cap.cycle_ns[: cap.cycles], cap.cycle_first[: cap.cycles]
+    out: dict = {"rejected": None, "capture_gaps": int(np.count_nonzero(np.diff(frame_of) != 1)) if frames > 1 else 0}
+    span = int(gap * rate)
     # A target cycle that runs late (VM jitter) still takes messages sent after its nominal
     # start, so the onset can come before the send on either clock by up to about a period:
-    # look from ``lead`` frames before the send (silent there: the level was set to 0 0.1 s
+    # look from ``lead`` frames before the send (silent there: the level was set to 0 ``gap``
     # earlier) and keep such zero or negative latencies as measured.
     lead_ns = 2 * period * 1_000_000_000 // rate
-    for sent_frame, sent_ns in sends:
-        after = ns_of >= sent_ns  # (not always monotonic: cycles catch up after a late one)
-        first = int(np.argmax(after)) if after.any() else frames
-        before = ns_of >= sent_ns - lead_ns
-        start = int(np.argmax(before)) if before.any() else frames
-        if start < 64 or first + span > frames:
-            out["rejected"]["outside capture"] += 1
-            continue
-        if np.any(np.abs(data[start - 64 : start]) > SILENT_THRESHOLD):
-            out["rejected"]["not silent before"] += 1
-            continue
-        onset = np.flatnonzero(np.abs(data[start : first + span]) > SILENT_THRESHOLD)
-        if not onset.size:
-            out["rejected"]["no onset"] += 1
-            continue
-        i = start + int(onset[0])
-        out["frame"].append(int(frame_of[i] - sent_frame) / rate)
-        out["wall"].append(int(ns_of[i] - sent_ns) / 1e9)
+    after = ns_of >= sent_ns  # (not always monotonic: cycles catch up after a late one)
+    first = int(np.argmax(after)) if after.any() else frames
+    before = ns_of >= sent_ns - lead_ns
+    start = int(np.argmax(before)) if before.any() else frames
+    if start < 64 or first + span > frames:
+        out["rejected"] = "outside capture"
+        return out
+    if np.any(np.abs(data[start - 64 : start]) > SILENT_THRESHOLD):
+        out["rejected"] = "not silent before"
+        return out
+    onset = np.flatnonzero(np.abs(data[start : first + span]) > SILENT_THRESHOLD)
+    if not onset.size:
+        out["rejected"] = "no onset"
+        return out
+    i = start + int(onset[0])
+    out["frame_s"] = int(frame_of[i] - sent_frame) / rate
+    out["wall_s"] = int(ns_of[i] - sent_ns) / 1e9
+    following = np.flatnonzero(cycle_ns >= sent_ns)
+    if following.size:
+        onset_cycle = int(np.searchsorted(cycle_first, i, side="right")) - 1
+        next_ns = int(cycle_ns[following[0]])
+        period_ns = period * 1e9 / rate
+        out["wait_s"] = (next_ns - sent_ns) / 1e9
+        out["excess_s"] = out["wall_s"] - out["wait_s"]
+        out["cycles_after"] = int(round((int(cycle_ns[onset_cycle]) - next_ns) / period_ns))
+        out["offset_in_cycle"] = int(i - cycle_first[onset_cycle])
     return out
 
 
-def _lat_summary(values: list[float]) -> dict:
-    if not values:
+def latency_trials(target: Target, agent: JackAgent, source: str, trials: int, gap: float) -> list[dict]:
+    """``trials`` trials in a row on one target (the flood phase): their :func:`one_trial` dicts."""
+    agent.capture_open(source, 2 * gap + 0.5)
+    try:
+        target.set_loud(False)
+        time.sleep(0.2)
+        return [one_trial(target, agent, gap) for _ in range(trials)]
+    finally:
+        agent.capture_close()
+
+
+def _ms(values) -> list[float]:
+    return [1e3 * v for v in values]
+
+
+def _lat_summary(values_s: list[float]) -> dict:
+    """Median (with its 95 % order-statistic interval), p95, mean, range of latencies in seconds."""
+    if not values_s:
         return {"median_ms": None, "p95_ms": None, "min_ms": None, "max_ms": None, "not_positive": 0, "all_ms": []}
+    ms = _ms(values_s)
+    med, lo, hi = median_ci(ms)
     return {
-        "median_ms": 1e3 * statistics.median(values),
-        "p95_ms": 1e3 * float(np.percentile(values, 95)),
-        "min_ms": 1e3 * min(values),
-        "max_ms": 1e3 * max(values),
-        "not_positive": sum(1 for x in values if x <= 0),
-        "all_ms": [round(1e3 * x, 3) for x in values],
+        "median_ms": med,
+        "median_ci95_ms": [lo, hi],
+        "p95_ms": float(np.percentile(ms, 95)),
+        "mean_ms": float(np.mean(ms)),
+        "min_ms": min(ms),
+        "max_ms": max(ms),
+        "not_positive": sum(1 for x in values_s if x <= 0),
+        "all_ms": [round(x, 3) for x in ms],
     }
 
 
-def level_check(target: Target, server: str, source: str) -> dict:
+def summarise_trials(results: list[dict], clock: str) -> dict:
+    """The latency block of a phase from its trials (accepted and rejected)."""
+    ok = [t for t in results if not t["rejected"]]
+    rejected: dict[str, int] = {}
+    for t in results:
+        if t["rejected"]:
+            rejected[t["rejected"]] = rejected.get(t["rejected"], 0) + 1
+    placed = [t for t in ok if "cycles_after" in t]
+    hist: dict[str, int] = {}
+    for t in placed:
+        key = str(max(-1, min(2, t["cycles_after"])))
+        hist[key] = hist.get(key, 0) + 1
+    excess = _ms(t["excess_s"] for t in placed)
+    return {
+        "trials": len(ok),
+        "clock": clock,
+        **_lat_summary([t[f"{clock}_s"] for t in ok]),
+        "frame_clock": _lat_summary([t["frame_s"] for t in ok]),
+        "wall_clock": _lat_summary([t["wall_s"] for t in ok]),
+        "wait_to_next_cycle": _lat_summary([t["wait_s"] for t in placed]),
+        "excess_mean_ms": float(np.mean(excess)) if excess else None,
+        "cycle_taken": {
+            "meaning": "-1 the cycle running at the send, 0 the next, 1 one missed, 2 two or more",
+            **{k: hist.get(k, 0) for k in ("-1", "0", "1", "2")},
+        },
+        "rejected": rejected,
+        "capture_gaps": sum(t["capture_gaps"] for t in results),
+    }
+
+
+def level_check(target: Target, agent: JackAgent, source: str) -> dict:
     """Loud then silent for 0.4 s each: the synth really runs and silence is exact."""
-    with Capture(server, source, 1.0) as cap:
+    agent.capture_open(source, 1.0)
+    try:
         target.set_loud(True)
         time.sleep(0.2)
-        cap.armed = True
+        agent.arm()
         time.sleep(0.4)
-        cap.armed = False
-        loud = cap.data[: cap.frames].copy()
+        loud = agent.levels()
         target.set_loud(False)
         time.sleep(0.2)
-        cap.frames, cap.start_frame = 0, None
-        cap.armed = True
+        agent.arm()
         time.sleep(0.4)
-        cap.armed = False
-        quiet = cap.data[: cap.frames].copy()
+        quiet = agent.levels()
+    finally:
+        agent.capture_close()
     target.set_loud(True)
-    rms = float(np.sqrt(np.mean(loud.astype(np.float64) ** 2))) if loud.size else 0.0
+    rms = loud["rms"]
     return {
         "loud_rms": rms,
         "loud_dbfs": 20 * math.log10(rms) if rms > 0 else None,
-        "silent_max_abs": float(np.max(np.abs(quiet))) if quiet.size else None,
+        "silent_max_abs": quiet["max_abs"],
     }
 
 
@@ -1028,57 +1291,79 @@ def stop_sender(proc: subprocess.Popen) -> dict:
         return {"error": f"sender output: {out[-200:]!r}"}
 
 
-def run_phase(phase: str, target: Target, jackd: JackServer, mon: Monitor, source: str, args, tmp: Path) -> dict:
-    sender = None
-    result: dict = {"phase": phase}
-    if phase == "flood":
-        sender = start_sender(target, args.rate, args.seconds + args.trials * 2 * LAT_GAP_S + 30, tmp)
-        time.sleep(0.5)
-        if sender.poll() is not None:
-            raise RuntimeError(f"flood sender exited: {stop_sender(sender)}")
+def measure_window(run: PeerRun, seconds: float, sender: subprocess.Popen | None) -> dict:
+    """CPU, DSP load and xruns of one target over ``seconds`` of loud streaming."""
+    target, jackd, mon = run.target, run.jackd, run.mon
     target.set_loud(True)
     time.sleep(0.2)
     a = Snapshot(target, jackd, mon, sender)
     loads = []
-    end = a.t + args.seconds
+    end = a.t + seconds
     while time.monotonic() < end:
         time.sleep(min(0.25, max(0.0, end - time.monotonic())))
         loads.append(mon.cpu_load())
     b = Snapshot(target, jackd, mon, sender)
-    result["window"] = window(a, b, jackd, target.client_name)
-    result["window"]["dsp_load_mean_pct"] = float(np.mean(loads)) if loads else None
-    result["window"]["dsp_load_max_pct"] = float(np.max(loads)) if loads else None
-    if phase == "flood" and target.flood_changes_level():
-        lat = {"frame": [], "wall": [], "skipped": f"the flood ({args.vibsynth_flood}) sets the level"}
-    elif args.trials > 0:
-        lat = latency_trials(target, jackd.name, source, args.trials)
+    out = window(a, b, jackd, target.client_name)
+    out["dsp_load_mean_pct"] = float(np.mean(loads)) if loads else None
+    out["dsp_load_max_pct"] = float(np.max(loads)) if loads else None
+    out["loadavg"] = os.getloadavg()
+    return out
+
+
+def flood_phase(run: PeerRun, args, tmp: Path) -> dict:
+    """The flood phase of one target: the window, then ``--trials`` trials in a row, under the flood."""
+    target, jackd, mon = run.target, run.jackd, run.mon
+    sender = start_sender(target, args.rate, args.seconds + args.trials * 2 * args.gap + 30, tmp)
+    time.sleep(0.5)
+    if sender.poll() is not None:
+        raise RuntimeError(f"flood sender exited: {stop_sender(sender)}")
+    result: dict = {"phase": "flood"}
+    a = Snapshot(target, jackd, mon, sender)
+    result["window"] = measure_window(run, args.seconds, sender)
+    b = Snapshot(target, jackd, mon, sender)
+    if target.flood_changes_level():
+        result["latency"] = {
+            **summarise_trials([], args.latency_clock),
+            "skipped": f"the flood ({args.vibsynth_flood}) sets the level",
+        }
     else:
-        lat = {"frame": [], "wall": []}
+        trials = latency_trials(target, mon, run.source, args.trials, args.gap) if args.trials > 0 else []
+        result["latency"] = summarise_trials(trials, args.latency_clock)
     c = Snapshot(target, jackd, mon, sender)
     result["latency_window"] = window(b, c, jackd, target.client_name)
     result["phase_total"] = window(a, c, jackd, target.client_name)
-    result["latency"] = {
-        "trials": len(lat["frame"]),
-        "clock": args.latency_clock,
-        **_lat_summary(lat[args.latency_clock]),
-        "frame_clock": _lat_summary(lat["frame"]),
-        "wall_clock": _lat_summary(lat["wall"]),
-        **{k: v for k, v in lat.items() if k not in ("frame", "wall")},
-    }
-    if sender is not None:
-        result["sender"] = stop_sender(sender)
+    result["sender"] = stop_sender(sender)
     target.set_loud(True)
     return result
 
 
-def run_peer(peer: str, args, tmp: Path, gains: list[float]) -> dict:
-    entry: dict = {"peer": peer, "when": time.strftime("%Y-%m-%d %H:%M:%S"), "loadavg_before": os.getloadavg()}
-    jackd = JackServer(f"bench-peers-{peer}", args.jack_rate, args.jack_period, tmp)
-    target = TARGETS[peer](jackd, tmp, gains, args)
-    mon = None
-    try:
+class PeerRun:
+    """One peer for the whole run: its private JACK server, monitor, target and results entry."""
+
+    def __init__(self, peer: str, args, tmp: Path, gains: list[float]) -> None:
+        self.peer, self.args = peer, args
+        self.entry: dict = {"peer": peer, "when": time.strftime("%Y-%m-%d %H:%M:%S"), "loadavg_before": os.getloadavg()}
+        self.jackd = JackServer(f"bench-peers-{peer}", args.jack_rate, args.jack_period, tmp)
+        self.target: Target = TARGETS[peer](self.jackd, tmp, gains, args)
+        self.mon: JackAgent = None  # type: ignore[assignment]
+        self.tmp = tmp
+        self.source = ""
+        self.stopped = False
+
+    @property
+    def ok(self) -> bool:
+        return "error" not in self.entry
+
+    def fail(self, exc: BaseException) -> None:
+        self.entry["error"] = f"{type(exc).__name__}: {exc}"
+        print(f"  {self.peer}: FAILED: {self.entry['error']}", file=sys.stderr, flush=True)
+        self.stop()
+
+    def start(self) -> None:
+        """JACK server, its baseline, the target, its output port, the level check (raises on failure)."""
+        args, jackd, target, peer = self.args, self.jackd, self.target, self.peer
         jackd.start()
-        entry["jack"] = {
+        self.entry["jack"] = {
             "server": jackd.name,
             "driver": "dummy",
             "rate": jackd.rate,
@@ -1087,54 +1372,168 @@ def run_peer(peer: str, args, tmp: Path, gains: list[float]) -> dict:
             "command": f"jackd -n {jackd.name} {'-R ' if jackd.realtime else ''}-d dummy -r {jackd.rate} "
             f"-p {jackd.period}",
         }
-        mon = Monitor(jackd.name)
+        self.mon = JackAgent(jackd, self.tmp)
         if args.baseline > 0:
             print(f"  {peer}: baseline ({args.baseline:g} s of the JACK server alone)", flush=True)
-            entry["baseline"] = baseline(jackd, mon, args.baseline)
+            self.entry["baseline"] = baseline(jackd, self.mon, args.baseline)
         t0 = time.monotonic()
         target.start()
-        entry["startup_s"] = time.monotonic() - t0
+        self.entry["startup_s"] = time.monotonic() - t0
         deadline = time.monotonic() + 30
-        source = mon.find_output()
+        source = self.mon.find_output()
         while source is None and time.monotonic() < deadline:
             time.sleep(0.1)
-            source = mon.find_output()
+            source = self.mon.find_output()
         if source is None:
             raise RuntimeError(f"{peer} registered no JACK output port; log:\n{target.log_tail()}")
+        self.source = source
         target.client_name = source.split(":", 1)[0]
-        entry.update(
+        self.entry.update(
             version=target.version,
             settings=target.settings,
             jack_port=source,
-            connections=mon.ensure_playback(source),
+            connections=self.mon.ensure_playback(source),
             flood_rate=args.rate,
         )
         time.sleep(args.warmup)
-        entry["level_check"] = level_check(target, jackd.name, source)
-        if entry["level_check"]["loud_rms"] <= 0:
+        self.entry["level_check"] = level_check(target, self.mon, source)
+        if self.entry["level_check"]["loud_rms"] <= 0:
             raise RuntimeError(f"{peer} output is silent at the loud setting; log:\n{target.log_tail()}")
-        entry["phases"] = {}
-        for phase in ("idle", "flood"):
-            print(f"  {peer}: {phase} ({args.seconds:g} s + {args.trials} latency trials)", flush=True)
-            entry["phases"][phase] = run_phase(phase, target, jackd, mon, source, args, tmp)
-        if peer == "vibsynth":
-            entry["status_end"] = target.status()
-    except Exception as exc:
-        entry["error"] = f"{type(exc).__name__}: {exc}"
-        print(f"  {peer}: FAILED: {entry['error']}", file=sys.stderr, flush=True)
-    finally:
+        self.entry["phases"] = {}
+
+    def stop(self) -> None:
+        if self.stopped:
+            return
+        self.stopped = True
+        if self.peer == "vibsynth" and self.ok and self.target.proc is not None and self.target.proc.poll() is None:
+            self.entry["status_end"] = self.target.status()
         try:
-            target.stop()
+            self.target.stop()
         finally:
-            if mon is not None:
+            if self.mon is not None:
                 try:
-                    mon.close()
+                    self.mon.close()
                 except Exception:
                     pass
-            jackd.stop()
-        text = jackd.log_text()
-        entry["jackd_log_totals"] = jackd_events(text, target.client_name or peer)
-    return entry
+            self.jackd.stop()
+        self.entry["jackd_log_totals"] = jackd_events(self.jackd.log_text(), self.target.client_name or self.peer)
+
+
+def interleaved_idle_latency(runs: list[PeerRun], args) -> dict:
+    """The idle latency trials of every running peer, interleaved: ``--idle-trials`` rounds, one
+    trial of each peer per round in a fresh random order (seeded by ``--seed``), so machine load
+    hits all peers alike. Per peer its trials (with ``round``), plus the stage's load."""
+    rng = np.random.default_rng(args.seed)
+    opened: list[PeerRun] = []
+    trials: dict[str, list[dict]] = {run.peer: [] for run in runs}
+    snaps = {}
+    try:
+        for run in runs:
+            run.mon.capture_open(run.source, 2 * args.gap + 0.5)
+            opened.append(run)
+            run.target.set_loud(False)
+        time.sleep(0.2)
+        for run in runs:
+            snaps[run.peer] = Snapshot(run.target, run.jackd, run.mon, None)
+        t0, sys0, load0 = time.monotonic(), system_cpu(), os.getloadavg()
+        busy_per_round = []
+        # stratified send phases, one per round, shared by the round's peers (see one_trial)
+        strata = rng.permutation(args.idle_trials)
+        for r in range(args.idle_trials):
+            rs0 = system_cpu()
+            order = rng.permutation(len(runs))
+            before = (strata[r] + rng.random()) / args.idle_trials if args.phase == "stratified" else None
+            for position, k in enumerate(order):
+                run = runs[int(k)]
+                t = one_trial(run.target, run.mon, args.gap, before)
+                t.update(round=r, position=position, before_cycle=before)
+                trials[run.peer].append(t)
+            rs1 = system_cpu()
+            busy_per_round.append(100.0 * (rs1[0] - rs0[0]) / max(1, rs1[1] - rs0[1]))
+            if (r + 1) % 100 == 0:
+                print(f"    round {r + 1}/{args.idle_trials}, load {os.getloadavg()[0]:.2f}", flush=True)
+        sys1 = system_cpu()
+        stage = {
+            "rounds": args.idle_trials,
+            "seconds": time.monotonic() - t0,
+            "gap_s": args.gap,
+            "seed": args.seed,
+            "phase": args.phase,
+            "loadavg_before": load0,
+            "loadavg_after": os.getloadavg(),
+            "machine_busy_pct_of_all_cores": 100.0 * (sys1[0] - sys0[0]) / max(1, sys1[1] - sys0[1]),
+            "machine_busy_pct_per_round_p10_p50_p90": [float(v) for v in np.percentile(busy_per_round, [10, 50, 90])],
+        }
+        for run in runs:
+            end = Snapshot(run.target, run.jackd, run.mon, None)
+            stage.setdefault("windows", {})[run.peer] = window(snaps[run.peer], end, run.jackd, run.target.client_name)
+    finally:
+        for run in opened:
+            try:
+                run.mon.capture_close()
+            except Exception:
+                pass
+        for run in runs:
+            try:
+                run.target.set_loud(True)
+            except Exception:
+                pass
+    return {"stage": stage, "trials": trials}
+
+
+def compare_idle(trials: dict[str, list[dict]], rounds: int, clock: str) -> dict:
+    """vibsynth's idle median against the better peer's (lower median), with paired-bootstrap intervals."""
+    ok = {p: [t for t in ts if not t["rejected"]] for p, ts in trials.items()}
+    if "vibsynth" not in ok or len(ok) < 2 or not all(ok.values()):
+        return {}
+    names, m = round_matrix(ok, f"{clock}_s", rounds)
+    m = 1e3 * m
+    v = names.index("vibsynth")
+    others = [k for k, n in enumerate(names) if n != "vibsynth"]
+
+    def med(x: np.ndarray) -> np.ndarray:
+        return np.nanmedian(x, axis=1)  # (batch, systems)
+
+    def ratio_best(x: np.ndarray) -> np.ndarray:
+        meds = med(x)
+        return meds[:, v] / np.min(meds[:, others], axis=1)
+
+    def diff_best(x: np.ndarray) -> np.ndarray:
+        meds = med(x)
+        return meds[:, v] - np.min(meds[:, others], axis=1)
+
+    medians = np.nanmedian(m, axis=0)
+    best = names[others[int(np.argmin(medians[others]))]]
+    out: dict = {
+        "clock": clock,
+        "better_peer": best,
+        "ratio_to_better_peer": list(paired_bootstrap(m, ratio_best)),
+        "difference_to_better_peer_ms": list(paired_bootstrap(m, diff_best)),
+        "per_peer": {},
+        "interval": "95 %, bootstrap of whole rounds (4000 resamples, seed 0); the better peer is re-chosen "
+        "in each resample",
+    }
+    placed = {p: [t for t in ts if "excess_s" in t] for p, ts in ok.items()}
+    if all(placed.values()):
+        _, e = round_matrix(placed, "excess_s", rounds)
+        e = 1e3 * e
+
+        def excess_diff(x: np.ndarray, k: int) -> np.ndarray:
+            means = np.nanmean(x, axis=1)
+            return means[:, v] - means[:, k]
+
+        out["excess_mean_ms"] = {
+            names[k]: list(paired_bootstrap(e, lambda x, k=k: np.nanmean(x, axis=1)[:, k])) for k in range(len(names))
+        }
+        out["excess_difference_ms"] = {
+            names[k]: list(paired_bootstrap(e, lambda x, k=k: excess_diff(x, k))) for k in others
+        }
+    for k in others:
+        out["per_peer"][names[k]] = {
+            "ratio": list(paired_bootstrap(m, lambda x, k=k: med(x)[:, v] / med(x)[:, k])),
+            "difference_ms": list(paired_bootstrap(m, lambda x, k=k: med(x)[:, v] - med(x)[:, k])),
+        }
+    return out
 
 
 # ------------------------------------------------------------------ machine info, table
@@ -1216,13 +1615,21 @@ def _fmt(v, spec: str = ".1f") -> str:
     return "-" if v is None else format(v, spec)
 
 
-def print_table(peers: dict) -> None:
-    head = (
-        f"{'peer':<9} {'phase':<8} {'CPU %':>6} {'DSP %':>6} {'xruns':>5} {'underfl':>7} {'drv late':>8} "
-        f"{'lat med':>7} {'lat p95':>7} {'n':>3}  {'sent/s':>7}"
-    )
+def _ci(lat: dict) -> str:
+    ci = lat.get("median_ci95_ms")
+    return f"[{ci[0]:.2f}, {ci[1]:.2f}]" if ci else "-"
+
+
+def _print_head(head: str) -> None:
     print(head)
     print("-" * len(head))
+
+
+def print_table(peers: dict, idle: dict | None = None) -> None:
+    _print_head(
+        f"{'peer':<9} {'phase':<8} {'CPU %':>6} {'DSP %':>6} {'xruns':>5} {'underfl':>7} {'drv late':>8} "
+        f"{'lat med':>7} {'95% CI':>12} {'lat p95':>7} {'n':>4}  {'sent/s':>7}"
+    )
     for peer, entry in peers.items():
         if "skipped" in entry:
             print(f"{peer:<9} SKIPPED: {entry['skipped']}")
@@ -1234,13 +1641,13 @@ def print_table(peers: dict) -> None:
                 f"{base['driver_late_wakeups']:>8}"
             )
         for phase, r in entry.get("phases", {}).items():
-            w, tot, lat = r["window"], r["phase_total"], r["latency"]
+            w, tot, lat = r["window"], r.get("phase_total", r["window"]), r.get("latency", {})
             sent = r.get("sender", {}).get("rate")
             print(
                 f"{peer:<9} {phase:<8} {_fmt(w['cpu_pct']):>6} {_fmt(w['dsp_load_mean_pct']):>6} "
                 f"{tot['target_late_cycles']:>5} {_fmt(w.get('status_underflows'), 'd'):>7} "
-                f"{tot['driver_late_wakeups']:>8} {_fmt(lat['median_ms'], '.2f'):>7} {_fmt(lat['p95_ms'], '.2f'):>7} "
-                f"{lat['trials']:>3}  {_fmt(sent, '.0f'):>7}"
+                f"{tot['driver_late_wakeups']:>8} {_fmt(lat.get('median_ms'), '.2f'):>7} {_ci(lat):>12} "
+                f"{_fmt(lat.get('p95_ms'), '.2f'):>7} {lat.get('trials', 0):>4}  {_fmt(sent, '.0f'):>7}"
             )
         if "error" in entry:
             print(f"{peer:<9} FAILED: {entry['error'].splitlines()[0]}")
@@ -1250,8 +1657,60 @@ def print_table(peers: dict) -> None:
         "/status underflows in the window (PortAudio counts every xrun of the server, so during the trials it "
         "also counts the capture client's); drv late = the dummy driver's own late wake-ups (window + trials; "
         "(jack) = the server alone before the target starts); latency ms, OSC send -> first output sample "
-        "(n trials)."
+        "(n trials; idle: interleaved rounds), median with its 95 % order-statistic interval."
     )
+    if idle:
+        print_idle(peers, idle)
+
+
+def print_idle(peers: dict, idle: dict) -> None:
+    """The interleaved idle latency: per peer, then vibsynth against the peers."""
+    st = idle["stage"]
+    print(
+        f"\nIdle latency, {st['rounds']} rounds interleaved ({st['seconds']:.0f} s; load average "
+        f"{st['loadavg_before'][0]:.2f} -> {st['loadavg_after'][0]:.2f}; machine busy "
+        f"{st['machine_busy_pct_of_all_cores']:.0f} % of all cores, per round p10/p50/p90 "
+        + "/".join(f"{v:.0f}" for v in st["machine_busy_pct_per_round_p10_p50_p90"])
+        + " %)"
+    )
+    _print_head(
+        f"{'peer':<9} {'median':>7} {'95% CI':>14} {'mean':>6} {'wait':>6} {'excess':>7} "
+        f"{'cur':>5} {'next':>5} {'miss':>5} {'n':>4}"
+    )
+    for peer, entry in peers.items():
+        lat = entry.get("phases", {}).get("idle", {}).get("latency")
+        if not lat or not lat.get("interleaved") or not lat.get("trials"):
+            continue
+        hist = lat["cycle_taken"]
+        placed = max(1, hist["-1"] + hist["0"] + hist["1"] + hist["2"])
+        print(
+            f"{peer:<9} {lat['median_ms']:>7.3f} {_ci(lat).replace(', ', ','):>14} {lat['mean_ms']:>6.3f} "
+            f"{_fmt(lat['wait_to_next_cycle']['mean_ms'], '.3f'):>6} {_fmt(lat['excess_mean_ms'], '.3f'):>7} "
+            f"{100 * hist['-1'] / placed:>4.0f}% {100 * hist['0'] / placed:>4.0f}% "
+            f"{100 * (hist['1'] + hist['2']) / placed:>4.0f}% {lat['trials']:>4}"
+        )
+    print(
+        "ms; wait = send -> start of the next cycle (mean); excess = latency - wait (mean); the cycle that took the "
+        "message: cur = the one running at the send (its callback started after the send), next = the next one, "
+        "miss = a later one."
+    )
+    cmp_ = idle.get("comparison")
+    if cmp_:
+        r, d = cmp_["ratio_to_better_peer"], cmp_["difference_to_better_peer_ms"]
+        print(
+            f"vibsynth / better peer ({cmp_['better_peer']}), median: {r[0]:.3f}x [{r[1]:.3f}, {r[2]:.3f}], "
+            f"{d[0]:+.3f} ms [{d[1]:+.3f}, {d[2]:+.3f}]"
+        )
+        for peer, c in cmp_["per_peer"].items():
+            r, d = c["ratio"], c["difference_ms"]
+            print(f"vibsynth / {peer}: {r[0]:.3f}x [{r[1]:.3f}, {r[2]:.3f}], {d[0]:+.3f} ms [{d[1]:+.3f}, {d[2]:+.3f}]")
+        for peer, c in cmp_.get("excess_difference_ms", {}).items():
+            e = cmp_["excess_mean_ms"]
+            print(
+                f"excess (latency - wait to the next cycle), mean: vibsynth {e['vibsynth'][0]:.3f} ms, {peer} "
+                f"{e[peer][0]:.3f} ms; difference {c[0]:+.3f} ms [{c[1]:+.3f}, {c[2]:+.3f}]"
+            )
+        print(f"({cmp_['interval']})")
 
 
 # ------------------------------------------------------------------ child entry points
@@ -1334,6 +1793,63 @@ def flood_child(argv: list[str]) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ the run
+def _sum_windows(*windows: dict) -> dict:
+    keys = ("target_late_cycles", "other_clients_late", "driver_late_wakeups", "process_errors", "xrun_callbacks")
+    return {k: sum(int(w.get(k, 0)) for w in windows) for k in keys}
+
+
+def run_stages(runs: list[PeerRun], args, result: dict) -> None:
+    """Idle windows (one peer after the other), the interleaved idle latency trials (all peers),
+    then the flood phases (one peer after the other). Every peer streams throughout."""
+    for run in [r for r in runs if r.ok]:
+        print(f"  {run.peer}: idle window ({args.seconds:g} s)", flush=True)
+        try:
+            run.entry["phases"]["idle"] = {"phase": "idle", "window": measure_window(run, args.seconds, None)}
+        except Exception as exc:
+            run.fail(exc)
+    live = [r for r in runs if r.ok]
+    if live and args.idle_trials > 0:
+        print(
+            f"  idle latency: {args.idle_trials} rounds x {len(live)} peers ({', '.join(r.peer for r in live)}), "
+            f"interleaved in random order",
+            flush=True,
+        )
+        got = interleaved_idle_latency(live, args)
+        stage, trials = got["stage"], got["trials"]
+        for run in live:
+            phase = run.entry["phases"]["idle"]
+            phase["latency"] = dict(summarise_trials(trials[run.peer], args.latency_clock), interleaved=True)
+            phase["latency"]["trial_log"] = [
+                {
+                    k: t.get(k)
+                    for k in (
+                        "round",
+                        "position",
+                        "before_cycle",
+                        "wall_s",
+                        "frame_s",
+                        "wait_s",
+                        "cycles_after",
+                        "rejected",
+                    )
+                }
+                for t in trials[run.peer]
+            ]
+            phase["latency_window"] = stage["windows"][run.peer]
+            phase["phase_total"] = _sum_windows(phase["window"], phase["latency_window"])
+        result["idle_latency"] = {
+            "stage": {k: v for k, v in stage.items() if k != "windows"},
+            "comparison": compare_idle(trials, args.idle_trials, args.latency_clock),
+        }
+    for run in [r for r in runs if r.ok]:
+        print(f"  {run.peer}: flood ({args.seconds:g} s + {args.trials} latency trials)", flush=True)
+        try:
+            run.entry["phases"]["flood"] = flood_phase(run, args, run.tmp)
+        except Exception as exc:
+            run.fail(exc)
+
+
 # ------------------------------------------------------------------ main
 class BenchTimeout(BaseException):
     """Raised by SIGALRM (--timeout); not an Exception, so no per-peer handler swallows it."""
@@ -1345,9 +1861,33 @@ def main(argv: list[str] | None = None) -> int:
         return pyo_child(argv[1:])
     if argv[:1] == ["_flood"]:
         return flood_child(argv[1:])
+    if argv[:1] == ["_jack_agent"]:
+        return jack_agent(argv[1:])
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=10.0, help="measurement window per phase (default 10)")
-    parser.add_argument("--trials", type=int, default=50, help="latency trials per phase (default 50; 0 = none)")
+    parser.add_argument(
+        "--idle-trials",
+        type=int,
+        default=800,
+        help="idle latency rounds: one trial of every peer per round, interleaved (default 800; 0 = none)",
+    )
+    parser.add_argument(
+        "--trials", type=int, default=50, help="latency trials under the flood, per peer (default 50; 0 = none)"
+    )
+    parser.add_argument(
+        "--gap",
+        type=float,
+        default=0.05,
+        help="seconds of silence before, and of sound after, each send",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the interleaving order and phases (default 0)")
+    parser.add_argument(
+        "--phase",
+        choices=("stratified", "free"),
+        default="stratified",
+        help="idle trials: send at a stratified fraction of the cycle, the same for every peer of a round "
+        "(default), or whenever the gap ends (free)",
+    )
     parser.add_argument("--rate", type=int, default=10000, help="flood rate, OSC messages/s (default 10000)")
     parser.add_argument("--only", default=",".join(PEERS), help="comma-separated subset of: " + ", ".join(PEERS))
     parser.add_argument(
@@ -1362,6 +1902,13 @@ def main(argv: list[str] | None = None) -> int:
         choices=("wall", "frame"),
         default="wall",
         help="clock of the latency columns (both are in the JSON; default wall, see latency_trials)",
+    )
+    parser.add_argument(
+        "--vibsynth-src",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="run vibsynth from this source folder (its C core already built in place) instead of the working tree",
     )
     parser.add_argument(
         "--vibsynth-rev",
@@ -1404,8 +1951,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bench_peers: the JACK-Client Python module is not usable ({exc})", file=sys.stderr)
         return 2
 
-    per_peer = 15 + args.warmup + args.baseline + 2 * (args.seconds + args.trials * 2 * LAT_GAP_S + 2)
-    timeout = args.timeout or 2 * per_peer * len(peers) + 120
+    expected = len(peers) * (25 + args.warmup + args.baseline + 2 * args.seconds + args.trials * 2 * args.gap + 4)
+    expected += args.idle_trials * len(peers) * (2 * args.gap + 0.02)
+    timeout = args.timeout or 2 * expected + 120
 
     def on_alarm(*_):
         raise BenchTimeout(f"run exceeded --timeout {timeout:.0f} s")
@@ -1436,14 +1984,17 @@ def main(argv: list[str] | None = None) -> int:
             "band_gains": gains,
             "band_gains_origin": gains_origin,
             "vibsynth_flood": args.vibsynth_flood,
-            "latency_gap_s": LAT_GAP_S,
+            "latency_gap_s": args.gap,
+            "idle_trials": args.idle_trials,
+            "seed": args.seed,
             "silent_threshold": SILENT_THRESHOLD,
         },
         "peers": {},
     }
     print(
-        f"bench_peers: {', '.join(peers)}; {args.seconds:g} s per phase, {args.trials} latency trials, flood "
-        f"{args.rate} msg/s, JACK dummy {args.jack_rate} Hz / {args.jack_period}; bound {timeout:.0f} s",
+        f"bench_peers: {', '.join(peers)}; {args.seconds:g} s windows, {args.idle_trials} interleaved idle latency "
+        f"rounds, {args.trials} latency trials under a {args.rate} msg/s flood, JACK dummy {args.jack_rate} Hz / "
+        f"{args.jack_period}; load {os.getloadavg()[0]:.2f}; bound {timeout:.0f} s",
         flush=True,
     )
     status = 0
@@ -1453,28 +2004,42 @@ def main(argv: list[str] | None = None) -> int:
             args.vibsynth_src_dir, args.vibsynth_source = None, "working tree" + _git_describe()
             if args.vibsynth_rev and "vibsynth" in peers:
                 args.vibsynth_src_dir, args.vibsynth_source = vibsynth_snapshot(args.vibsynth_rev, tmp)
+            elif args.vibsynth_src:
+                args.vibsynth_src_dir = args.vibsynth_src.resolve()
+                args.vibsynth_source = f"source folder {args.vibsynth_src_dir}"
             result["settings"]["vibsynth_source"] = args.vibsynth_source if "vibsynth" in peers else None
             if "vibsynth" in peers:
                 result["machine"]["versions"]["vibsynth"] = args.vibsynth_source
-            for peer in peers:
-                missing = peer_missing(peer)
-                if missing:
-                    print(f"  {peer}: SKIPPED: {missing}", flush=True)
-                    result["peers"][peer] = {"peer": peer, "skipped": missing}
-                    continue
-                try:
-                    entry = run_peer(peer, args, tmp, gains)
-                except (KeyboardInterrupt, BenchTimeout) as exc:
-                    result["peers"][peer] = {
-                        "peer": peer,
-                        "when": time.strftime("%Y-%m-%d %H:%M:%S"),
-                        "error": f"interrupted ({str(exc) or 'Ctrl-C or SIGTERM'})",
-                    }
-                    raise
-                result["peers"][peer] = entry
-                if "error" in entry:
-                    status = 1
-                time.sleep(1.0)
+            runs = []
+            try:
+                for peer in peers:
+                    missing = peer_missing(peer)
+                    if missing:
+                        print(f"  {peer}: SKIPPED: {missing}", flush=True)
+                        result["peers"][peer] = {"peer": peer, "skipped": missing}
+                        continue
+                    run = PeerRun(peer, args, tmp, gains)
+                    runs.append(run)
+                    result["peers"][peer] = run.entry
+                    print(f"  {peer}: starting", flush=True)
+                    try:
+                        run.start()
+                    except Exception as exc:
+                        run.fail(exc)
+                run_stages(runs, args, result)
+            except (KeyboardInterrupt, BenchTimeout) as exc:
+                for run in runs:
+                    if run.ok and not run.stopped:
+                        run.entry["error"] = f"interrupted ({str(exc) or 'Ctrl-C or SIGTERM'})"
+                raise
+            finally:
+                for run in runs:
+                    try:
+                        run.stop()
+                    except Exception as exc:
+                        print(f"bench_peers: stopping {run.peer}: {exc}", file=sys.stderr)
+            if any(not run.ok for run in runs):
+                status = 1
     except (KeyboardInterrupt, BenchTimeout) as exc:
         print(f"\nbench_peers: interrupted ({str(exc) or 'Ctrl-C or SIGTERM'}); stopping everything", file=sys.stderr)
         status = 130 if isinstance(exc, KeyboardInterrupt) else 3
@@ -1484,7 +2049,7 @@ def main(argv: list[str] | None = None) -> int:
     if not result["peers"]:
         return status
     print()
-    print_table(result["peers"])
+    print_table(result["peers"], result.get("idle_latency"))
     out = dict(result)
     if not args.no_merge and args.json.exists():
         try:
