@@ -12,6 +12,8 @@ __version__``): the version is in ``vibsynth/_version.py``.
 from __future__ import annotations
 
 import ast
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -234,3 +236,35 @@ def test_the_checker_sees_a_circle_through_a_lazy_import_and_not_through_type_ch
         "vibsynth.settings.files (vibsynth/settings/files.py:1) -> "
         "vibsynth.settings.models (vibsynth/settings/models.py:5) -> vibsynth.settings.files"
     ]
+
+
+def _folders(root: Path) -> list[str]:
+    """Every folder of the package and the repository's top-level folders (``vibsynth/dsp/``, ``docs/``).
+
+    The files git knows or would add (tracked, or new and not ignored), so caches and builds are
+    not folders of the project; a top-level link to a folder (``presets``) is one.
+    """
+    if shutil.which("git") is None or not (root / ".git").exists():
+        pytest.skip("needs the git checkout")
+    listed = subprocess.run(
+        ["git", "ls-files", "--cached", "--others", "--exclude-standard", "-z"],
+        cwd=root,
+        capture_output=True,
+        check=True,
+    ).stdout.decode()
+    folders = set()
+    for name in filter(None, listed.split("\0")):
+        parts = Path(name).parts
+        if not (root / name).exists():
+            continue  # deleted in the work tree
+        if parts[0] == PACKAGE.name:
+            folders.update("/".join(parts[:n]) + "/" for n in range(1, len(parts)))
+        elif len(parts) > 1 or (root / name).is_dir():
+            folders.add(parts[0] + "/")
+    return sorted(folders)
+
+
+def test_every_folder_is_named_in_the_architecture_page():
+    root = PACKAGE.parent
+    text = (root / "docs" / "architecture.md").read_text(encoding="utf-8")
+    assert [folder for folder in _folders(root) if f"`{folder}`" not in text] == []
