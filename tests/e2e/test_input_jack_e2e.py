@@ -37,6 +37,8 @@ from tests.e2e.jackutil import (
 )
 from tests.e2e.test_device_loss_e2e import DETECT_WITHIN_S, RESUME_WITHIN_S, JackServer, unavailable
 from vibsynth.app.service import build_engine
+from vibsynth.engine.commands import SetKnob
+from vibsynth.engine.input_ring import frame_offset, output_stamp
 from vibsynth.engine.inputs import SoundDeviceInput
 from vibsynth.engine.outputs import SoundDeviceOutput
 from vibsynth.settings.config import load_config
@@ -49,6 +51,25 @@ FS = 48000
 #: dummy driver's own late wake-ups on a shared VM as underflows (0-2 per 10 s).
 SLACK = 3
 WINDOW_S = float(os.environ.get("VIBSYNTH_INPUT_WINDOW_S", "5"))
+
+
+def new_ports(before: set[str]) -> list[str]:
+    """PortAudio's input ports that appeared since ``before`` (PortAudio numbers them on, stream after stream)."""
+    ports = subprocess.run(["jack_lsp"], capture_output=True, text=True, check=True).stdout.split()
+    fresh = [p for p in ports if p.startswith("PortAudio:in_") and p not in before]
+    return sorted(fresh, key=lambda name: (len(name), name))
+
+
+def jack_ports() -> set[str]:
+    return set(subprocess.run(["jack_lsp"], capture_output=True, text=True, check=True).stdout.split())
+
+
+def exact_but_for_xruns(bad: int, checked: int, disturbances: int, channels: int) -> bool:
+    """A received counter is exact, but for the cycles JACK itself lost (xruns, the Python player's late cycles).
+
+    Each lost cycle breaks the counter once per channel (a block skipped): at most a few wrong steps each.
+    """
+    return checked > 0 and (bad == 0 or bad <= 2 * channels * disturbances)
 
 
 def counter_errors(x: np.ndarray) -> tuple[int, int]:
@@ -99,15 +120,14 @@ def output(jack_server, config):
 
 def test_input_ports_stand_beside_the_output_and_carry_a_signal_sample_exact(output):
     inp = SoundDeviceInput("system:1,2", fs=FS, host_api="JACK", block_size=128)
+    before = jack_ports()
     inp.open_ports()
     try:
-        ports = subprocess.run(["jack_lsp"], capture_output=True, text=True, check=True).stdout.split()
-        assert {"PortAudio:in_0", "PortAudio:in_1"} <= set(ports), ports
-        assert [p for p in ports if p.startswith("PortAudio:out_")], "the output's ports are in the same client"
+        targets = new_ports(before)
+        assert len(targets) == 2, targets  # in_N, in_N+1 of the client "PortAudio" ...
         with JackPlayer(n_ports=2) as player:
-            targets = portaudio_input_ports(player.client)
-            assert targets == ["PortAudio:in_0", "PortAudio:in_1"]
-            assert portaudio_output_ports(player.client)  # the output's, beside them
+            assert set(targets) <= set(portaudio_input_ports(player.client))
+            assert portaudio_output_ports(player.client)  # ... beside the output's out_M
             player.connect(targets)
             player.play()
             inp.open()
@@ -119,6 +139,7 @@ def test_input_ports_stand_beside_the_output_and_carry_a_signal_sample_exact(out
             x = reader.data()
             gaps = player.gaps
         status = inp.status()
+        xruns = status["input_overflows"]
         first = np.argmax(np.any(x != 0, axis=1))  # before the player's first cycle: silence
         checked, bad = counter_errors(x[first:])
         stamp = inp.ring.stamp()
@@ -130,8 +151,7 @@ def test_input_ports_stand_beside_the_output_and_carry_a_signal_sample_exact(out
             f"(capture latency {1000 * (stamp.current_time - stamp.adc_time):.2f} ms)"
         )
         assert x.shape[0] > 2.5 * FS and checked > 2 * 2.5 * FS
-        if gaps == 0:  # a cycle the Python player missed is a hole in the instrument, not the input
-            assert bad == 0
+        assert exact_but_for_xruns(bad, checked, gaps + xruns, 2), (bad, gaps, xruns)
         assert status["overflows"] == status["dropped_frames"] == 0
         assert status["state"] == "open" and status["level_db"] == pytest.approx(-6.02, abs=0.01)
     finally:
@@ -174,6 +194,57 @@ def test_an_input_beside_the_output_adds_no_underflows(output):
     assert inp.ring.overflows == 0 and callbacks > 0.9 * WINDOW_S * FS / 128
 
 
+def test_a_loop_from_the_output_back_to_the_input_is_bit_exact_and_its_latency_measured(output):
+    """Calibration's measurement loop, inside JACK: PortAudio:out_0 -> PortAudio:in_0.
+
+    The engine's own output (its tap) comes back in the ring bit for bit, a whole number of frames
+    later; the block stamps of the two streams predict that delay (callback times: the loop never
+    leaves the server), so a loop through an actuator and a sensor is that delay plus its own.
+    """
+    engine = output.engine
+    engine.submit(SetKnob("intensity", 0.8, glide_s=0.0))
+    inp = SoundDeviceInput("system:1", fs=FS, host_api="JACK", block_size=128)
+    before = jack_ports()
+    inp.open_ports()
+    try:
+        (port,) = new_ports(before)
+        with JackPlayer(n_ports=1) as wiring:  # a client that only wires the loop
+            wiring.client.connect(portaudio_output_ports(wiring.client)[0], port)
+            inp.open()
+            time.sleep(0.5)
+            inp.ring.skip()
+            time.sleep(0.25)
+            first = inp.ring.frames_read
+            x = inp.ring.read()[:, 0]
+            tap = np.empty((32768, engine.channels), np.float32)
+            tap_end = engine._core.read_tap(tap)
+            offsets = [frame_offset(output_stamp(engine), inp.ring.stamp(), FS, device_times=False)]
+            for _ in range(20):
+                time.sleep(0.01)
+                offsets.append(frame_offset(output_stamp(engine), inp.ring.stamp(), FS, device_times=False))
+    finally:
+        inp.close()
+    assert inp.ring.dropped_frames == 0 and x.size > 0.2 * FS and np.abs(x).max() > 1e-3
+    if inp.ring.input_overflows:
+        pytest.skip(f"JACK lost {inp.ring.input_overflows} cycles (xruns) during the window: no exact loop to check")
+    y = tap[:, 0]
+    y_first = tap_end - y.size  # output frame of y[0]
+    # the lag D (input frame - output frame) at which the input is the output, bit for bit
+    corr = np.correlate(y.astype(np.float64), x[:2048].astype(np.float64), mode="valid")
+    start = int(np.argmax(corr))
+    lag = first - (y_first + start)
+    seg = x[: min(x.size, y.size - start)]
+    np.testing.assert_array_equal(seg, y[start : start + seg.size])
+    predicted = float(np.median(offsets))
+    spread = float(np.ptp(offsets))
+    print(
+        f"\nloop out_0 -> in_0 inside JACK: input frame = output frame + {lag}, bit for bit (the counters "
+        f"start apart); the block stamps predict {predicted:.1f} (spread {spread:.1f} over 21 pairs of blocks)"
+    )
+    # the loop adds nothing inside the server: the stamps alone give the offset, to a few frames
+    assert abs(lag - predicted) <= 8 + spread
+
+
 # ---------------------------------------------------------------------- server death
 _CHILD = r"""
 import json, sys, threading, time
@@ -182,6 +253,8 @@ sys.path.insert(0, sys.argv[2])
 from tests.e2e.jackutil import JackPlayer, portaudio_input_ports
 from tests.e2e.test_input_jack_e2e import counter_errors
 from vibsynth.app.service import build_engine
+from vibsynth.engine.commands import SetKnob
+from vibsynth.engine.input_ring import frame_offset, output_stamp
 from vibsynth.engine.inputs import SoundDeviceInput
 from vibsynth.engine.outputs import SoundDeviceOutput
 from vibsynth.engine.supervisor import hard_exit
@@ -197,6 +270,7 @@ lock = threading.Lock()
 got = []
 player = [None]
 players = []
+xruns = [0]
 
 def read():
     while True:
@@ -214,6 +288,7 @@ def commands():
             p.connect(portaudio_input_ports(p.client))
             with lock:
                 got.clear()
+                xruns[0] = inp.ring.input_overflows
             p.play()
             player[0] = p
             players.append(p)
@@ -222,7 +297,8 @@ def commands():
                 x = np.concatenate(got) if got else np.zeros((0, 2), np.float32)
             nz = np.flatnonzero(np.any(x != 0, axis=1))
             checked, bad = counter_errors(x[nz[0]:]) if nz.size else (0, 0)
-            print(json.dumps({"check": [int(checked), int(bad), player[0].gaps if player[0] else -1]}), flush=True)
+            lost = (player[0].gaps if player[0] else 0) + inp.ring.input_overflows - xruns[0]
+            print(json.dumps({"check": [int(checked), int(bad), int(lost)]}), flush=True)
         elif cmd == "quit":
             hard_exit(0)
 
@@ -320,7 +396,7 @@ def test_input_reports_a_dead_server_and_recovers_with_the_output(private_jack, 
         child.send("play")
         time.sleep(1.0)
         checked, bad, gaps = child.check()
-        assert checked > 48000 and (bad == 0 or gaps > 0), (checked, bad, gaps)
+        assert checked > 48000 and exact_but_for_xruns(bad, checked, gaps, 2), (checked, bad, gaps)
 
         killed = private_jack.kill()
         line, seen = child.wait(lambda d: d.get("input") in ("lost", "retrying"), 5.0, "the input lost")
@@ -345,10 +421,11 @@ def test_input_reports_a_dead_server_and_recovers_with_the_output(private_jack, 
         print(
             f"\nJACK killed -> input 'lost' in {1000 * detect:.0f} ms; server back -> input and output open again in "
             f"{resumed:.2f} s (input's own recovery: {line['recovered_after_s']:.2f} s after the loss); counter "
-            f"before {checked} steps, {bad} wrong; after {checked2} steps, {bad2} wrong (player gaps {gaps2})"
+            f"before {checked} steps, {bad} wrong; after {checked2} steps, {bad2} wrong (JACK cycles lost "
+            f"{gaps}, {gaps2})"
         )
         assert detect < DETECT_WITHIN_S and resumed < RESUME_WITHIN_S
-        assert checked2 > 48000 and (bad2 == 0 or gaps2 > 0), (checked2, bad2, gaps2)
+        assert checked2 > 48000 and exact_but_for_xruns(bad2, checked2, gaps2, 2), (checked2, bad2, gaps2)
         log = child.log.read_text()
         assert "audio input device lost: JACK server shut down" in log and "audio input device back" in log
         assert "Traceback" not in log

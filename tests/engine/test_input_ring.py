@@ -18,6 +18,7 @@ from vibsynth.engine.input_ring import (
     PA_INPUT_UNDERFLOW,
     BlockStamp,
     InputRing,
+    frame_offset,
     output_stamp,
     ring_capacity,
 )
@@ -196,3 +197,18 @@ def test_bad_arguments_are_refused():
         ring.skip(1.5)  # type: ignore[arg-type]
     assert ring.read(10).shape == (0, 2) and ring.skip() == 0
     assert _core.MAX_CHANNELS == 64
+
+
+def test_frame_offset_puts_both_streams_on_one_clock():
+    fs = 1000.0
+    # output frame 500 is rendered at t = 10.000 s and heard 5 ms later; input frame 2000 was
+    # captured 3 ms before its callback at t = 10.020 s (each stream's PortAudio clock differs)
+    out = BlockStamp(frame=500, adc_time=0.0, current_time=1.0, dac_time=1.005, monotonic=10.000)
+    inp = BlockStamp(frame=2000, adc_time=7.017, current_time=7.020, dac_time=0.0, monotonic=10.020)
+    # heard at 10.005; input frame 2000 captured at 10.017: input frame 2000 - 12 = 1988 was captured then
+    assert frame_offset(out, inp, fs) == pytest.approx(1988 - 500)
+    assert frame_offset(out, inp, fs, device_times=False) == pytest.approx(2000 - 20 - 500)
+    # any later pair of blocks of the same streams gives the same offset
+    later_out = BlockStamp(frame=600, adc_time=0.0, current_time=1.1, dac_time=1.105, monotonic=10.100)
+    later_in = BlockStamp(frame=2050, adc_time=7.067, current_time=7.070, dac_time=0.0, monotonic=10.070)
+    assert frame_offset(later_out, later_in, fs) == pytest.approx(1988 - 500)

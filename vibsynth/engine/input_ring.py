@@ -31,7 +31,7 @@ from vibsynth.errors import ParameterError
 if TYPE_CHECKING:
     from vibsynth.engine.engine import Engine
 
-__all__ = ["InputRing", "BlockStamp", "MAX_INPUT_CHANNELS", "ring_capacity", "output_stamp"]
+__all__ = ["InputRing", "BlockStamp", "MAX_INPUT_CHANNELS", "ring_capacity", "output_stamp", "frame_offset"]
 
 #: Most channels a ring carries.
 MAX_INPUT_CHANNELS = _input.MAX_CHANNELS
@@ -247,3 +247,31 @@ def output_stamp(engine: Engine) -> BlockStamp | None:
     frame is heard, on the same PortAudio clock as an input's :meth:`InputRing.stamp`.
     """
     return BlockStamp.of(engine._core.output_stamp())
+
+
+def frame_offset(output: BlockStamp, input: BlockStamp, fs: float, *, device_times: bool = True) -> float:
+    """Input frame minus output frame of the same instant, from one block stamp of each stream.
+
+    Output frame ``f`` is heard while input frame ``f + offset`` is captured; a loop (actuator
+    -> sensor) that brings the output back ``D`` frames later (by cross-correlation) has its own
+    latency ``D - offset``. The two stamps may come from any blocks of the two streams: they are
+    put on the monotonic clock (each stream's PortAudio clock may have its own origin).
+
+    Parameters
+    ----------
+    output, input : BlockStamp
+        :func:`output_stamp` and :meth:`InputRing.stamp`.
+    fs : float
+        The rate of both streams.
+    device_times : bool
+        Count the driver's DAC and ADC latencies (``dac_time - current_time``, ``current_time -
+        adc_time``) where the host API gives them; False: the callbacks' own times (a loop inside
+        the audio server, e.g. a JACK connection from an output port to an input port).
+    """
+    heard = output.monotonic
+    captured = input.monotonic
+    if device_times and output.dac_time:
+        heard += output.dac_time - output.current_time
+    if device_times and input.adc_time:
+        captured -= input.current_time - input.adc_time
+    return float(input.frame - output.frame) + (heard - captured) * float(fs)
