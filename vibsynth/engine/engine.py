@@ -72,6 +72,7 @@ from vibsynth.engine import _core
 from vibsynth.engine.bank import NoiseBank
 from vibsynth.engine.commands import LAYER_NAMES, CancelLayer, Command, Panic, SetGlide, SetKnob, SetLayer, SetMute
 from vibsynth.errors import EngineBusyError, ParameterError, ScheduleFullError
+from vibsynth.limits import BANK_LEVELS_MAX, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX, VOICE_GAIN_MAX, VOICE_GLIDE_MAX_S
 
 if TYPE_CHECKING:
     from vibsynth.settings.models_config import Audio, Knobs
@@ -193,8 +194,8 @@ class Engine:
         max_block: int = 4096,
         schedule_capacity: int = DEFAULT_SCHEDULE_CAPACITY,
     ) -> None:
-        if int(channels) != channels or channels < 1 or channels > 64:
-            raise ParameterError(f"channels must be an integer in 1..64, got {channels!r}")
+        if int(channels) != channels or channels < 1 or channels > MAX_CHANNELS:
+            raise ParameterError(f"channels must be an integer in 1..{MAX_CHANNELS}, got {channels!r}")
         for name, value in (
             ("ceiling_db", ceiling_db),
             ("range_db", range_db),
@@ -214,10 +215,12 @@ class Engine:
             raise ParameterError(f"initial intensity must be in [0, 1], got {initial_intensity}")
         if max_block < 1 or max_block >= bank.n_samples:
             raise ParameterError(f"max_block must be in 1..{bank.n_samples - 1}, got {max_block}")
-        if int(schedule_capacity) != schedule_capacity or not 1 <= schedule_capacity <= 1_000_000:
-            raise ParameterError(f"schedule_capacity must be an integer in 1..1000000, got {schedule_capacity!r}")
-        if bank.levels > 4096:
-            raise ParameterError(f"the engine supports up to 4096 bank levels, got {bank.levels}")
+        if int(schedule_capacity) != schedule_capacity or not 1 <= schedule_capacity <= SCHEDULE_CAPACITY_MAX:
+            raise ParameterError(
+                f"schedule_capacity must be an integer in 1..{SCHEDULE_CAPACITY_MAX}, got {schedule_capacity!r}"
+            )
+        if bank.levels > BANK_LEVELS_MAX:
+            raise ParameterError(f"the engine supports up to {BANK_LEVELS_MAX} bank levels, got {bank.levels}")
         self.bank = bank
         self.fs = float(bank.fs)
         self.channels = int(channels)
@@ -405,8 +408,8 @@ class Engine:
     ) -> None:
         """Glide the gain of the voices channels are playing (does nothing where none plays)."""
         glide = float(glide_s)
-        if not (math.isfinite(glide) and 0.0 <= glide <= 10.0):
-            raise ParameterError(f"voice gain glide must be in [0, 10] s, got {glide_s!r}")
+        if not (math.isfinite(glide) and 0.0 <= glide <= VOICE_GLIDE_MAX_S):
+            raise ParameterError(f"voice gain glide must be in [0, {VOICE_GLIDE_MAX_S:g}] s, got {glide_s!r}")
         self._push((_core.CMD_VOICE, 0, self._voice_gain(gain), glide), self._voice_channels(channels), None)
 
     def stop_buffer(self, *, channels: tuple[int, ...] | list[int] | None = None) -> None:
@@ -426,8 +429,8 @@ class Engine:
     @staticmethod
     def _voice_gain(gain: float) -> float:
         value = float(gain)
-        if not (math.isfinite(value) and 0.0 <= value <= 16.0):
-            raise ParameterError(f"voice gain must be in [0, 16], got {gain!r}")
+        if not (math.isfinite(value) and 0.0 <= value <= VOICE_GAIN_MAX):
+            raise ParameterError(f"voice gain must be in [0, {VOICE_GAIN_MAX:g}], got {gain!r}")
         return value
 
     def _voice_channels(self, channels: tuple[int, ...] | list[int] | None) -> tuple[int, ...] | None:

@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, ValidationInfo, model_validator
 from pydantic_core import PydanticCustomError
 
+from vibsynth.limits import GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
 from vibsynth.settings.models_lab import Lab
@@ -67,7 +68,6 @@ CONFIG_VERSION = 1
 PROFILE_NAME = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 #: Names of layout channels: lower-case words and numbers joined by '-' (``thumb``, ``back-3-2``).
 CHANNEL_NAME = r"^[a-z0-9]+(-[a-z0-9]+)*$"
-MAX_CHANNELS = 64
 #: An actuator's frequency response: [Hz, dB] points.
 RESPONSE_POINTS = Points("Hz", 0.0, True, "dB", -60.0, 60.0, 1)
 #: The OSC /speed curve: [mm/s, intensity] points.
@@ -144,7 +144,7 @@ class Knobs(Section):
         le=0,
     )
     range_db: float = setting(40.0, "intensity (0, 1] spans this many dB below the ceiling", unit="dB", gt=0, le=120)
-    glide_ms: float = setting(20.0, "knob smoothing, 0 = jump", unit="ms", ge=0, le=10000)
+    glide_ms: float = setting(20.0, "knob smoothing, 0 = jump", unit="ms", ge=0, le=GLIDE_MAX_MS)
     mute_fade_ms: float = setting(10.0, "fade of mute/panic", unit="ms", ge=0, le=1000)
     limiter_ceiling: float = setting(
         0.891, "no output sample exceeds this (|x|), about -1 dBFS", unit="(full scale)", gt=0, le=1
@@ -153,7 +153,7 @@ class Knobs(Section):
         10000,
         "most timetagged commands waiting at once; more are refused with an error reply and counted (`schedule_full`)",
         ge=1,
-        le=1_000_000,
+        le=SCHEDULE_CAPACITY_MAX,
     )
     balance_min: float = setting(
         -3.5, "live controls are limited to this range", unit="(knob units)", ge=-KNOB_BALANCE_LIMIT, le=0
@@ -263,7 +263,9 @@ class Midi(Section):
     )
     virtual: bool = setting(False, 'create a virtual input named "vibsynth"')
     mode: Literal["gate", "continuous"] = setting("gate", "gate | continuous")
-    release_ms: float = setting(150.0, "release fade after note-off in gate mode", unit="ms", ge=0, le=10000)
+    release_ms: float = setting(
+        150.0, "release fade after note-off in gate mode", unit="ms", ge=0, le=GLIDE_MAX_MS
+    )
     velocity_curve: float = setting(1.0, "intensity = (velocity/127) ** curve", ge=0.1, le=10)
     pitch_bend_range: float = setting(0.5, "balance offset at full bend", unit="(knob units)", ge=0, le=8)
     channel_map: Annotated[
@@ -275,7 +277,7 @@ class Midi(Section):
         schema=_MIDI_CHANNEL_KEYS,
     )
     mpe: bool = setting(False, "MPE: one actuator channel per MIDI channel")
-    attack_ms: Annotated[float, Field(ge=0, le=10000)] | None = setting(
+    attack_ms: Annotated[float, Field(ge=0, le=GLIDE_MAX_MS)] | None = setting(
         None, "gate-mode attack glide; null = the knob glide", unit="ms"
     )
     cc_glide_max_ms: float = setting(
@@ -283,7 +285,7 @@ class Midi(Section):
         "a CC move glides over the time since that controller's previous move, at most this (no zipper steps)",
         unit="ms",
         ge=0,
-        le=10000,
+        le=GLIDE_MAX_MS,
     )
     reconnect_interval_s: float = setting(
         1.0, "how often a vanished named port is looked for again", unit="s", ge=0.05, le=60

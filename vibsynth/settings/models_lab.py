@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 from pydantic import ValidationInfo, model_validator
 
+from vibsynth.limits import VOICE_GAIN_MAX
 from vibsynth.settings.fields import Section, cross_problem, setting
 
-__all__ = ["Lab"]
+__all__ = ["Lab", "lab_range"]
 
 
 class Lab(Section):
@@ -22,8 +25,9 @@ class Lab(Section):
     familiarisation_pairs: int = setting(
         30, "random pairs played before the dissimilarity test, not saved (paper: 30); 0 = none", ge=0, le=1000
     )
-    gain_min: float = setting(0.2, "lowest gain of the intensity equalisation (paper: 0.2)", gt=0, le=100)
-    gain_max: float = setting(5.0, "highest gain of the intensity equalisation (paper: 5)", gt=0, le=100)
+    # A stimulus plays as a buffer voice at its gain: the engine's voice gain limit bounds both.
+    gain_min: float = setting(0.2, "lowest gain of the intensity equalisation (paper: 0.2)", gt=0, le=VOICE_GAIN_MAX)
+    gain_max: float = setting(5.0, "highest gain of the intensity equalisation (paper: 5)", gt=0, le=VOICE_GAIN_MAX)
     level: float = setting(
         0.75,
         "intensity knob at which a stimulus set's median stimulus plays (its 80-200 Hz level through knobs.*)",
@@ -43,3 +47,14 @@ class Lab(Section):
                 "lab.gain_min",
             )
         return self
+
+
+@cache
+def lab_range(name: str) -> tuple[float, float, bool]:
+    """``(low, high, low_open)`` of a numeric ``lab:`` key, from :class:`Lab` (its one definition).
+
+    The research layer checks its session parameters (``LabParameters``) with it.
+    """
+    schema = Lab.model_json_schema()["properties"][name]
+    low_open = "exclusiveMinimum" in schema
+    return float(schema["exclusiveMinimum" if low_open else "minimum"]), float(schema["maximum"]), low_open

@@ -21,6 +21,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BeforeValidator, Field
 
+from vibsynth.limits import CLIP_GAIN_MAX, CLIP_LOOPS_MAX, CLIP_RATE_MAX, CLIP_RATE_MIN, GLIDE_MAX_MS
 from vibsynth.settings.fields import Section, ValueModel, problem, setting
 from vibsynth.settings.values import MIDI_CHANNELS
 
@@ -29,8 +30,6 @@ __all__ = ["MAX_NOTE_ENTRIES", "NOTE_MAX", "ClipNote", "MidiClips"]
 NOTE_MAX = 127
 #: Entries of ``midi_clips.notes`` (one per pad or key range; 128 notes x 16 channels at most mean anything).
 MAX_NOTE_ENTRIES = 256
-#: The playback limits of :mod:`vibsynth.control.clips.timeline` (settings cannot import control).
-_GAIN_MAX, _RATE_MIN, _RATE_MAX, _LOOPS_MAX = 4.0, 0.05, 20.0, 10_000
 
 _Note = Annotated[int, Field(ge=0, le=NOTE_MAX)]
 
@@ -55,13 +54,13 @@ class ClipNote(ValueModel):
     channels: Literal["all"] | Annotated[list[Annotated[int, Field(ge=1)]], Field(min_length=1)] | None = setting(
         None, "actuator channels (1-based list or 'all'); null = those of midi.channel_map"
     )
-    gain: float = setting(1.0, "multiplies the velocity gain", ge=0, le=_GAIN_MAX)
-    rate: float = setting(1.0, "playback rate (2 = twice as fast)", ge=_RATE_MIN, le=_RATE_MAX)
-    loops: int = setting(1, "passes of the loop region; 0 = until the note is released", ge=0, le=_LOOPS_MAX)
+    gain: float = setting(1.0, "multiplies the velocity gain", ge=0, le=CLIP_GAIN_MAX)
+    rate: float = setting(1.0, "playback rate (2 = twice as fast)", ge=CLIP_RATE_MIN, le=CLIP_RATE_MAX)
+    loops: int = setting(1, "passes of the loop region; 0 = until the note is released", ge=0, le=CLIP_LOOPS_MAX)
     note_off: Literal["stop", "ignore"] = setting(
         "stop", "stop: a note-off stops the clip (after the sustain pedal); ignore: it plays to its end"
     )
-    release_ms: Annotated[float, Field(ge=0, le=10000)] | None = setting(
+    release_ms: Annotated[float, Field(ge=0, le=GLIDE_MAX_MS)] | None = setting(
         None, "glide back after a note-off; null = midi_clips.release_ms", unit="ms"
     )
 
@@ -109,6 +108,6 @@ class MidiClips(Section):
     )
     velocity_curve: float = setting(1.0, "clip gain = (velocity/127) ** curve", ge=0.1, le=10)
     release_ms: float = setting(
-        30.0, "glide back to the knob state after a note-off stops a clip", unit="ms", ge=0, le=10000
+        30.0, "glide back to the knob state after a note-off stops a clip", unit="ms", ge=0, le=GLIDE_MAX_MS
     )
     sustain: bool = setting(True, "the sustain pedal (CC 64) holds note-offs until it is released")

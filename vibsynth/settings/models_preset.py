@@ -10,6 +10,7 @@ from typing import Annotated, Any
 
 from pydantic import BeforeValidator, ConfigDict, Field
 
+from vibsynth.limits import GLIDE_MAX_MS as _GLIDE_MAX_MS
 from vibsynth.settings.fields import SettingsModel, problem, setting
 from vibsynth.settings.models_config import PROFILE_NAME, RESPONSE_POINTS, ResponsePoint
 
@@ -32,7 +33,8 @@ __all__ = [
 PRESET_VERSION = 1
 #: Presets may hold balances beyond the database's +-1 (recordings outside it), up to this.
 BALANCE_LIMIT = 4.0
-GLIDE_MAX_MS = 10_000.0
+#: The longest glide (:data:`vibsynth.limits.GLIDE_MAX_MS`), a float in the preset schema.
+GLIDE_MAX_MS = float(_GLIDE_MAX_MS)
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 TAG_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9 _.-]{0,31}$"
 MAX_TAGS = 16

@@ -11,6 +11,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BeforeValidator, Field
 from pydantic_core import PydanticCustomError
 
+from vibsynth.limits import GLIDE_MAX_MS
 from vibsynth.settings.fields import Section, ValueModel, cross_problem, is_int, problem, setting
 from vibsynth.settings.values import BINDABLE_CC_MAX, MIDI_CHANNELS
 
@@ -98,7 +99,7 @@ class Sources(Section):
         "smooth", "roll-off law of a new source: linear, smooth, inverse-square or phantom"
     )
     glide_ms: float = setting(
-        20.0, "a position message glides there over this time, 0 = jump", unit="ms", ge=0, le=10000
+        20.0, "a position message glides there over this time, 0 = jump", unit="ms", ge=0, le=GLIDE_MAX_MS
     )
     update_ms: float = setting(
         10.0,

@@ -57,6 +57,7 @@ from dataclasses import dataclass
 from vibsynth.control.controller import check_range
 from vibsynth.engine.commands import KnobName
 from vibsynth.errors import ParameterError
+from vibsynth.limits import CLIP_GAIN_MAX, CLIP_LOOPS_MAX, CLIP_RATE_MAX, CLIP_RATE_MIN
 from vibsynth.settings.clips import Clip, Keyframe
 
 __all__ = [
@@ -76,12 +77,8 @@ __all__ = [
     "curve_pieces",
 ]
 
-#: Largest gain (intensity x gain is clamped to 1 anyway).
-GAIN_MAX = 4.0
-#: Playback rate range (time stretch; 1 = as designed).
-RATE_MIN, RATE_MAX = 0.05, 20.0
-#: Most loop passes one play may ask for (0 = until stopped).
-LOOPS_MAX = 10_000
+#: Playback limits: largest gain, rate range, most loop passes (defined in :mod:`vibsynth.limits`).
+GAIN_MAX, RATE_MIN, RATE_MAX, LOOPS_MAX = CLIP_GAIN_MAX, CLIP_RATE_MIN, CLIP_RATE_MAX, CLIP_LOOPS_MAX
 #: Largest distance (knob units) between a smooth segment's curve and its linear pieces,
 #: checked at each piece's quarter points.
 SMOOTH_TOLERANCE = 0.004

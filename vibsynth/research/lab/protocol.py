@@ -18,12 +18,10 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 from vibsynth.errors import ParameterError
-
-if TYPE_CHECKING:
-    from vibsynth.settings.models_lab import Lab
+from vibsynth.settings.models_lab import Lab, lab_range
 
 __all__ = [
     "PROTOCOLS",
@@ -129,22 +127,35 @@ class LabParameters:
     level: float = 0.75
 
     def __post_init__(self) -> None:
+        # (field, value, lab: key, scale): the ranges are the lab: section's (one definition).
         checks = (
-            ("stimulus_s", self.stimulus_s, 0.5, 10.0),
-            ("gap_s", self.gap_s, 0.0, 5.0),
-            ("gain_min", self.gain_min, 1e-3, 100.0),
-            ("gain_max", self.gain_max, 1e-3, 100.0),
-            ("level", self.level, 1e-3, 1.0),
+            ("stimulus_s", self.stimulus_s, "stimulus_s", 1.0),
+            ("gap_s", self.gap_s, "gap_ms", 1e-3),
+            ("gain_min", self.gain_min, "gain_min", 1.0),
+            ("gain_max", self.gain_max, "gain_max", 1.0),
+            ("level", self.level, "level", 1.0),
         )
-        for name, value, low, high in checks:
-            if not isinstance(value, (int, float)) or not math.isfinite(value) or not low <= value <= high:
-                raise ParameterError(f"{name} must be a number in [{low:g}, {high:g}], got {value!r}")
+        for name, value, key, scale in checks:
+            low, high, low_open = lab_range(key)
+            low, high = low * scale, high * scale
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not math.isfinite(value)
+                or (value <= low if low_open else value < low)
+                or value > high
+            ):
+                span = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+                raise ParameterError(f"{name} must be a number in {span}, got {value!r}")
         if self.gain_min >= self.gain_max:
             raise ParameterError(f"gain_min ({self.gain_min:g}) must be below gain_max ({self.gain_max:g})")
         if isinstance(self.familiarisation_pairs, bool) or not isinstance(self.familiarisation_pairs, int):
             raise ParameterError(f"familiarisation_pairs must be an integer, got {self.familiarisation_pairs!r}")
-        if not 0 <= self.familiarisation_pairs <= 1000:
-            raise ParameterError(f"familiarisation_pairs must be in [0, 1000], got {self.familiarisation_pairs}")
+        low, high, _ = lab_range("familiarisation_pairs")
+        if not low <= self.familiarisation_pairs <= high:
+            raise ParameterError(
+                f"familiarisation_pairs must be in [{low:g}, {high:g}], got {self.familiarisation_pairs}"
+            )
 
     @classmethod
     def from_settings(cls, lab: Lab, **overrides: Any) -> LabParameters:
