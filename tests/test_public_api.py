@@ -15,7 +15,18 @@ import vibsynth
 from vibsynth.errors import InputError, ParameterError
 
 ROOT = Path(__file__).resolve().parents[1]
-PUBLIC = ["Engine", "Basis", "analyze", "synthesize", "render", "load_config", "Preset", "Client", "VibsynthError"]
+PUBLIC = [
+    "Engine",
+    "Basis",
+    "analyze",
+    "synthesize",
+    "render",
+    "follow",
+    "load_config",
+    "Preset",
+    "Client",
+    "VibsynthError",
+]
 
 
 def _python(code: str) -> str:
@@ -120,3 +131,13 @@ def test_analyze_takes_samples_or_a_file(tmp_path):
         vibsynth.analyze(x)
     with pytest.raises(InputError):
         vibsynth.analyze(tmp_path / "missing.wav")
+
+
+def test_follow_uses_the_shipped_basis():
+    fs = 8000.0
+    x = np.random.default_rng(3).standard_normal(int(fs))
+    result = vibsynth.follow(x, fs)
+    assert result.mode == "vibration" and len(result) > 300
+    assert np.all((result.intensity > 0) & (result.intensity <= 1))
+    with pytest.raises(ParameterError, match="focus"):
+        vibsynth.follow(x, fs, mode="audio", focus="voices")

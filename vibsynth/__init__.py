@@ -11,6 +11,7 @@ The public API (docs/python.md) is the names below. They are imported on first u
 ``analyze``             intensity, balance and spectrum of a recording (array or file)
 ``synthesize``          noise with an exact 30-band spectrum (closed form)
 ``render``              a stationary texture through the real-time engine, offline
+``follow``              knob trajectories that follow a sound or vibration (docs/follow.md)
 ``Engine``, ``Basis``   the engine and the spectral basis
 ``load_config``         the effective configuration (defaults, user file, environment)
 ``Preset``              a named texture
@@ -28,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 from vibsynth._version import __version__
 
 if TYPE_CHECKING:
-    from vibsynth.app.api import analyze, render
+    from vibsynth.app.api import analyze, follow, render
     from vibsynth.app.client import Client
     from vibsynth.dsp.basis import Basis
     from vibsynth.dsp.synthesis import synthesize
@@ -43,6 +44,7 @@ __all__ = [
     "analyze",
     "synthesize",
     "render",
+    "follow",
     "load_config",
     "Preset",
     "Client",
@@ -57,6 +59,7 @@ _LAZY = {
     "analyze": "vibsynth.app.api",
     "synthesize": "vibsynth.dsp.synthesis",
     "render": "vibsynth.app.api",
+    "follow": "vibsynth.app.api",
     "load_config": "vibsynth.settings.config",
     "Preset": "vibsynth.settings.presets",
     "Client": "vibsynth.app.client",

@@ -1,4 +1,4 @@
-"""Convenience functions of the public API (``vibsynth.analyze``, ``vibsynth.render``).
+"""Convenience functions of the public API (``vibsynth.analyze``, ``vibsynth.render``, ``vibsynth.follow``).
 
 They wrap the science (:mod:`vibsynth.dsp`) and the engine (:mod:`vibsynth.engine`) with
 the defaults a script wants: the shipped basis, files read by name, the engine's default
@@ -22,6 +22,8 @@ from vibsynth.app.render import render as render_offline
 from vibsynth.dsp.analysis import Analysis
 from vibsynth.dsp.analysis import analyze as _analyze
 from vibsynth.dsp.basis import Basis
+from vibsynth.dsp.follow import Focus, FollowResult, Mode, TrackerParams
+from vibsynth.dsp.follow import follow as _follow
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB
 from vibsynth.engine.bank import BankSpec, build_bank
 from vibsynth.engine.engine import Engine
@@ -29,7 +31,7 @@ from vibsynth.errors import ParameterError
 from vibsynth.formats.basis_file import default_basis
 from vibsynth.formats.recordings import read_recording
 
-__all__ = ["analyze", "render", "RENDER_LOOP_SECONDS"]
+__all__ = ["analyze", "render", "follow", "RENDER_LOOP_SECONDS"]
 
 #: Loop length of the bank :func:`render` builds (the live default, ``bank.loop_seconds``).
 RENDER_LOOP_SECONDS = 4.0
@@ -180,3 +182,38 @@ def render(
     result = render_offline(engine, frames, collector)
     out: NDArray[np.float32] = result.output.reshape(frames)  # (frames, 1) -> (frames,), a view
     return out
+
+
+def follow(
+    x: ArrayLike,
+    fs: float,
+    *,
+    mode: Mode = "vibration",
+    focus: Focus = "all",
+    params: TrackerParams | None = None,
+    basis: Basis | None = None,
+    ceiling_db: float = DEFAULT_CEILING_DB,
+    range_db: float = DEFAULT_RANGE_DB,
+) -> FollowResult:
+    """Knob trajectories (intensity, balance, transients) that follow a sound or a vibration.
+
+    :func:`vibsynth.dsp.follow.follow` (the one tracker over the whole signal, latency
+    compensated; docs/follow.md) with the shipped basis unless ``basis`` is given. ``x`` has
+    shape (n,) or (n, channels) (mixed to their mean); ``params`` overrides ``mode`` and ``focus``;
+    ``ceiling_db`` / ``range_db`` are the engine's intensity mapping.
+
+    Returns
+    -------
+    result : FollowResult
+        ``times``, ``intensity``, ``balance``, ``level_db``, ``onsets`` and notes on bad input.
+    """
+    return _follow(
+        x,
+        fs,
+        mode=mode,
+        focus=focus,
+        params=params,
+        basis=basis if basis is not None else default_basis(),
+        ceiling_db=ceiling_db,
+        range_db=range_db,
+    )
