@@ -8,7 +8,7 @@ checks every module, lazy code included, for the old forms:
 
 * ``settings_of`` (re-validating a config's dict) named anywhere;
 * ``.data`` of a config (``config.data["audio"]``, ``load_config().data.get("osc")``);
-* ``.section("...")`` and ``.get("section.key")`` (a dotted config key).
+* ``.section("<a section>")``, and ``.get("section.key")`` (a dotted config key) of a config.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def _problems_in(tree: ast.AST) -> list[tuple[int, str]]:
             if node.func.attr == "section" and text in SECTIONS:
                 found.append((node.lineno, f'.section("{text}") (the dict form)'))
             match = _DOTTED_KEY.match(text)
-            if node.func.attr == "get" and match and match.group(1) in SECTIONS:
+            if node.func.attr == "get" and match and match.group(1) in SECTIONS and _is_config(node.func.value):
                 found.append((node.lineno, f'.get("{text}") (the dict form)'))
     return found
 
@@ -88,7 +88,7 @@ def test_the_checker_sees_each_old_form(tmp_path, monkeypatch):
         "    port = config.get('osc.port')\n"
         "    prefix = load_config().data.get('osc')\n"
         "    typed = settings_of(config)\n"
-        "    fine = other.data, other.get('not.a.section'), typed.knobs, other.section('x')\n"
+        "    fine = other.data, other.get('osc.port'), typed.knobs, other.section('x')  # a status reply...\n"
     )
     (fake / "settings" / "home.py").write_text("def g(config):\n    return config.data['audio']\n")
     monkeypatch.setattr(sys.modules[__name__], "PACKAGE", fake)
