@@ -12,7 +12,10 @@ Every error prints one line ``vibsynth: error: ...`` on stderr, never a tracebac
 * anything that goes wrong at run time (a bad or missing file, a device, a refused write, an
   unexpected failure) exits with :data:`EXIT_RUNTIME` (1). An unexpected exception says so and
   how to get the traceback (``-vv``);
-* a closed pipe (``vibsynth ... | head``) ends the command quietly.
+* a closed pipe (``vibsynth ... | head``, the reader gone before, during or after the first
+  write, the last write being the flush at exit) ends the command quietly, nothing on stderr,
+  with :data:`EXIT_PIPE` (141 = 128 + SIGPIPE): what a shell reports for a C program its
+  reader left (``yes | head``), so a script can tell the output was not all read.
 """
 
 from __future__ import annotations
@@ -24,15 +27,19 @@ import os
 import pkgutil
 import sys
 from collections.abc import Sequence
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from vibsynth import __version__
 from vibsynth.errors import ConfigError, ParameterError, VibsynthError
 
-__all__ = ["main", "build_parser", "EXIT_USAGE", "EXIT_RUNTIME"]
+if TYPE_CHECKING:
+    from _typeshed import SupportsWrite
+
+__all__ = ["main", "build_parser", "EXIT_USAGE", "EXIT_RUNTIME", "EXIT_PIPE"]
 
 EXIT_USAGE = 2
 EXIT_RUNTIME = 1
+EXIT_PIPE = 141  # 128 + SIGPIPE (13 on every POSIX system; written out for Windows, which has none)
 
 log = logging.getLogger("vibsynth")
 
@@ -68,6 +75,11 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_USAGE, f"vibsynth: error: {message} (see {self.prog} --help)\n")
 
+    def _print_message(self, message: str, file: SupportsWrite[str] | None = None) -> None:
+        # argparse drops an OSError here: a --help whose reader left would exit 0, as if read
+        if message:
+            (file or sys.stdout).write(message)
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with every discovered sub-command."""
@@ -91,8 +103,12 @@ def _error(message: str) -> None:
     print(f"vibsynth: error: {message}", file=sys.stderr)
 
 
-def _quiet_closed_pipe() -> None:
-    """stdout's reader went away (``| head``): drop what is left instead of a BrokenPipeError at exit."""
+def _drop_stdout() -> None:
+    """stdout cannot be written (its reader left, a full disk): what it still holds goes to /dev/null.
+
+    Python flushes stdout again when it exits; without this, that flush fails once more and
+    prints ``Exception ignored in: <_io.TextIOWrapper name='<stdout>'>``.
+    """
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
@@ -100,8 +116,53 @@ def _quiet_closed_pipe() -> None:
         pass
 
 
+def _flush_stdout(*, failed_already: bool) -> int | None:
+    """Write out what stdout holds now, not at exit: None when done, else the exit code.
+
+    A reader that left is :data:`EXIT_PIPE`, quietly; another failure (a full disk) is
+    :data:`EXIT_RUNTIME` with one line, unless the command ``failed_already`` (it said why).
+    """
+    try:
+        if sys.stdout is not None:
+            sys.stdout.flush()
+        return None
+    except BrokenPipeError:
+        _drop_stdout()
+        return EXIT_PIPE
+    except OSError as exc:
+        _drop_stdout()
+        if not failed_already:
+            _error(f"standard output: {exc.strerror or exc}")
+        return EXIT_RUNTIME
+    except ValueError:  # stdout closed by the command: nothing left to write
+        return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``vibsynth`` console script; returns the exit code."""
+    """Entry point of the ``vibsynth`` console script; returns the exit code.
+
+    argparse's own exits (``--help``, ``--version``, a usage error) raise :class:`SystemExit`
+    as usual. Whatever was printed is flushed here, so a reader that left (a closed pipe) gives
+    :data:`EXIT_PIPE` (as a C program killed by SIGPIPE, whatever it would have returned) and no
+    ``Exception ignored ... BrokenPipeError`` when Python exits. A command that failed and
+    could not write its output either keeps its own exit code.
+    """
+    try:
+        code = _run(argv)
+    except SystemExit as exc:
+        failed = _flush_stdout(failed_already=bool(exc.code))
+        if failed == EXIT_PIPE or (failed is not None and not exc.code):
+            raise SystemExit(failed) from None
+        raise
+    except BrokenPipeError:  # a write while the command ran
+        _drop_stdout()
+        return EXIT_PIPE
+    failed = _flush_stdout(failed_already=code != 0)
+    return failed if failed == EXIT_PIPE or (failed is not None and code == 0) else code
+
+
+def _run(argv: Sequence[str] | None) -> int:
+    """Parse and run one command: its exit code, every error as one line (a closed stdout is the caller's)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     level = logging.WARNING if args.verbose == 0 else logging.INFO if args.verbose == 1 else logging.DEBUG
@@ -112,9 +173,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return EXIT_USAGE
     try:
-        code = int(args.func(args) or 0)
-        sys.stdout.flush()
-        return code
+        return int(args.func(args) or 0)
+    except BrokenPipeError:  # stdout's reader left: main ends quietly (an OSError, but not an error to report)
+        raise
     except ParameterError as exc:
         _error(str(exc))
         return EXIT_USAGE
@@ -126,9 +187,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE if str(exc).startswith("command line:") else EXIT_RUNTIME
     except VibsynthError as exc:
         _error(str(exc))
-        return EXIT_RUNTIME
-    except BrokenPipeError:
-        _quiet_closed_pipe()
         return EXIT_RUNTIME
     except KeyboardInterrupt:
         return 130
