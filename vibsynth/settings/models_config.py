@@ -17,6 +17,7 @@ from pydantic_core import PydanticCustomError
 from vibsynth.limits import GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
+from vibsynth.settings.models_discovery import Discovery
 from vibsynth.settings.models_lab import Lab
 from vibsynth.settings.models_midi_clips import MidiClips
 from vibsynth.settings.models_sources import Sources, knob_conflict
@@ -422,6 +423,9 @@ class VibsynthConfig(SettingsModel):
     )
     sources: Sources = Field(default_factory=Sources, description="touch sources mixed onto the layout (docs/vr.md)")
     lab: Lab = Field(default_factory=Lab, description="the perception lab: sessions folder, the protocols' defaults")
+    discovery: Discovery = Field(
+        default_factory=Discovery, description="OSCQuery and mDNS advertising of the OSC server (docs/osc.md)"
+    )
 
     @model_validator(mode="after")
     def _cross_check(self, info: ValidationInfo) -> VibsynthConfig:
