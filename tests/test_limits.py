@@ -158,7 +158,9 @@ class Fed:
 #: A wider balance grid so the live range may reach its limits.
 WIDE = {"bank.balance_min": -10.0, "bank.balance_max": 10.0}
 FEEDS = {
-    "audio.rate": Fed(lambda bank, v: BankSpec.from_settings(Bank(loop_seconds=0.5), v, ActuatorResponse())),
+    "audio.rate": Fed(
+        lambda bank, v: BankSpec.from_settings(Bank(loop_seconds=0.5), v, ActuatorResponse()), (True, False)
+    ),
     "audio.block_size": Fed(lambda bank, v: _engine(bank, audio={"block_size": int(v)})),
     "audio.channels": Fed(lambda bank, v: _engine(bank, audio={"channels": int(v)}), (True, True)),
     "bank.balance_min": Fed(_bank_spec("balance_min"), context={"knobs.balance_min": -0.0, "knobs.balance_max": 0.1}),

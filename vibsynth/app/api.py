@@ -22,6 +22,7 @@ from vibsynth.app.render import render as render_offline
 from vibsynth.dsp.analysis import Analysis
 from vibsynth.dsp.analysis import analyze as _analyze
 from vibsynth.dsp.basis import Basis
+from vibsynth.dsp.filterbank import MIN_RATE_HZ
 from vibsynth.dsp.follow import Focus, FollowResult, Mode, TrackerParams
 from vibsynth.dsp.follow import follow as _follow
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB
@@ -151,7 +152,7 @@ def render(
     intensity = _finite("intensity", intensity, low=0.0, high=1.0)
     balance = _finite("balance", balance)
     seconds = _finite("seconds", seconds, low=0.0, open_low=True)
-    fs = _finite("fs", fs, low=2400.0)
+    fs = _finite("fs", fs, low=MIN_RATE_HZ)
     frames = int(round(seconds * fs))
     if frames < 1:
         raise ParameterError(f"{seconds:g} s at {fs:g} Hz is less than one sample")

@@ -57,6 +57,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vibsynth.dsp.basis import Basis
+from vibsynth.dsp.filterbank import MIN_RATE_HZ
 from vibsynth.dsp.intensity import intensity_response
 from vibsynth.dsp.synthesis import SpectralShaper
 from vibsynth.engine.actuator import ActuatorResponse
@@ -106,8 +107,11 @@ class BankSpec:
         for name in ("fs", "loop_seconds", "balance_min", "balance_max"):
             if not math.isfinite(float(getattr(self, name))):
                 raise ParameterError(f"bank {name} must be finite, got {getattr(self, name)!r}")
-        if self.fs <= 0 or self.loop_seconds <= 0:
-            raise ParameterError(f"bank needs a positive rate and loop length, got {self.fs}, {self.loop_seconds}")
+        if self.fs < MIN_RATE_HZ or self.loop_seconds <= 0:
+            raise ParameterError(
+                f"bank needs a rate of at least {MIN_RATE_HZ:g} Hz (its top band reaches 1000 Hz) and a positive "
+                f"loop length, got {self.fs}, {self.loop_seconds}"
+            )
         if self.n_samples < 1024:
             raise ParameterError(f"bank loop of {self.n_samples} samples is too short (need >= 1024)")
         if not self.balance_min < self.balance_max:

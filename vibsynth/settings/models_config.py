@@ -14,10 +14,10 @@ from typing import Annotated, Any, Literal
 from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, ValidationInfo, model_validator
 from pydantic_core import PydanticCustomError
 
+from vibsynth.dsp.filterbank import MIN_RATE_HZ
 from vibsynth.limits import GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
-from vibsynth.settings.models_discovery import Discovery
 from vibsynth.settings.models_lab import Lab
 from vibsynth.settings.models_midi_clips import MidiClips
 from vibsynth.settings.models_sources import Sources, knob_conflict
@@ -103,7 +103,7 @@ class Audio(Section):
         'e.g. "ALSA", "JACK Audio Connection Kit", "Core Audio", "WASAPI"',
         allowed="a host API name or null",
     )
-    rate: int = setting(48000, "sample rate", unit="Hz", ge=2400, le=384000)
+    rate: int = setting(48000, "sample rate", unit="Hz", ge=int(MIN_RATE_HZ), le=384000)
     block_size: int = setting(128, "frames per callback", unit="frames", ge=16, le=8192)
     latency: Literal["low", "high"] | Annotated[float, Field(gt=0, le=2)] = setting(
         "low", "low / high / seconds (float)", unit="s"
@@ -423,9 +423,6 @@ class VibsynthConfig(SettingsModel):
     )
     sources: Sources = Field(default_factory=Sources, description="touch sources mixed onto the layout (docs/vr.md)")
     lab: Lab = Field(default_factory=Lab, description="the perception lab: sessions folder, the protocols' defaults")
-    discovery: Discovery = Field(
-        default_factory=Discovery, description="OSCQuery and mDNS advertising of the OSC server (docs/osc.md)"
-    )
 
     @model_validator(mode="after")
     def _cross_check(self, info: ValidationInfo) -> VibsynthConfig:
