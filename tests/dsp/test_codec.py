@@ -127,13 +127,13 @@ def test_bad_input_is_rejected(basis):
 
 def test_segment_error_names_how_far_segments_flatten_a_ramp(basis):
     """A 30 dB ramp (a finger pressing harder) is not stationary: one segment is ~20 dB off its ends."""
-    from vibsynth.dsp.intensity import intensity_frames_db
+    from vibsynth.dsp.follow import window_analysis
 
     fs = 2800.0
     x = synthesize(basis.mean_db, fs=fs, n_samples=int(6 * fs), level_db=-40.0, rng=np.random.default_rng(0)).signal
     ramp = x * 10 ** (np.linspace(-30, 0, x.size) / 20)
     seg = encode_trajectory(ramp, fs=fs, basis=basis)
-    measured = intensity_frames_db(ramp, fs=fs, window_s=seg.window_s, hop_s=seg.hop_s)[: seg.n_frames]
+    measured = window_analysis(ramp, fs=fs, basis=basis, window_s=seg.window_s, hop_s=seg.hop_s)[3]
     loud = np.isfinite(seg.level_db)
     assert seg.window_level_error_db == pytest.approx(np.max(np.abs(seg.level_db[loud] - measured[loud])))
     assert seg.window_level_error_db > 10.0

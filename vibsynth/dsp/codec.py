@@ -12,7 +12,11 @@ Time-windowed codec (the paper's "further work")
 ------------------------------------------------
 A recording becomes a trajectory of ``(intensity level dB, t1)`` per analysis
 window (default 100 ms windows, 50 ms hop: the windows of the paper's
-non-stationarity metric).
+non-stationarity metric). The windows' band powers and levels are the follow
+tracker's vibration analysis (:func:`vibsynth.dsp.follow.window_analysis`): one
+definition of the windowed analysis for live following, offline following and
+the codec. Window and hop are whole hops of the tracker's internal rate, given
+back in source samples (at 2.8 kHz exactly the requested ones).
 
 Why segments, not raw windows: in a 100 ms window the low bands (10 Hz band:
 1.7 Hz wide) carry a fraction of one degree of freedom, so the per-window t1 of
@@ -58,6 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 from vibsynth.dsp.basis import Basis, normalise_db, to_db
 from vibsynth.dsp.dissimilarity import PAPER_WEIGHTS, dissimilarity
 from vibsynth.dsp.filterbank import band_power_frames, band_powers, validate_signal
+from vibsynth.dsp.follow.offline import window_analysis
 from vibsynth.dsp.intensity import (
     SILENCE_DB,
     intensity_frames_db,
@@ -425,13 +430,8 @@ def encode_trajectory(
     for name, v in (("tolerance_db", tolerance_db), ("tolerance_t1", tolerance_t1), ("min_t", min_t)):
         if not math.isfinite(v) or v < 0:
             raise ParameterError(f"{name} must be >= 0, got {v}")
-    frames = band_power_frames(
-        arr, fs=fs, window_s=window / fs, hop_s=hop / fs, centres=basis.centres_hz, order=basis.filter_order
-    )
-    with np.errstate(divide="ignore"):
-        levels = intensity_frames_db(arr, fs=fs, window_s=window / fs, hop_s=hop / fs)
-    n = min(frames.shape[0], levels.size)
-    frames, levels = frames[:n], levels[:n]
+    window, hop, frames, levels = window_analysis(arr, fs=fs, basis=basis, window_s=window / fs, hop_s=hop / fs)
+    n = levels.size
     if n == 0:
         raise ParameterError("signal is shorter than one analysis window")
     finite = np.isfinite(levels)

@@ -358,9 +358,9 @@ def window_analysis(
 
     A :class:`Tracker` in vibration mode with ``level_ms = balance_ms = window`` and
     ``uniform_windows`` (every band over the window, the bank run every hop, no bias
-    correction: the codec pools windows into segments itself), primed with the reversed start
-    so that frame ``i`` covers ``[i hop, i hop + window)`` of the input after the level filter's
-    delay is compensated.
+    correction: the codec pools windows into segments itself), primed like :func:`follow`, so
+    that frame ``i`` covers ``[i hop, i hop + window)`` of the input once the level filter's
+    delay is compensated; each band's own filter delay is compensated too (offline only).
 
     Parameters
     ----------
@@ -389,20 +389,26 @@ def window_analysis(
     if n_frames <= 0:
         return window, hop, np.zeros((0, basis.n_bands)), np.zeros(0)
     delay = int(round(tracker.filter_delay_s * fs))
+    # Offline the bands can wait for each other: each band's frames are shifted by its filter's
+    # delay beyond the level filter's, so a level step is one step in every band at once (a
+    # causal bank's low bands lag it by up to 0.2 s, which would read as a change of t1).
+    shift = np.round((an.band_delay_s - an.filter_delay_s) * an.fs / an.hop).astype(np.intp)
+    extra = int(max(0, shift.max())) * hop
     lead, head = _primer(arr, int(round(PRIME_S * fs)), int(round(SPLICE_S * fs)))
     align = (-(lead.size + window + delay)) % hop  # frame ends land on i hop + window + delay
     before = np.concatenate((np.zeros(align), lead))
     arr = np.concatenate((head, arr[head.size :]))
-    after = _mirror_after(arr, delay + hop)
+    after = _mirror_after(arr, delay + hop + extra)
     tracker.process(before)
-    levels, powers = [], []
-    for start in range(0, arr.size, OFFLINE_BLOCK):
-        f = tracker.process(arr[start : start + OFFLINE_BLOCK])
+    ends, levels, powers = [], [], []
+    for block in [arr[start : start + OFFLINE_BLOCK] for start in range(0, arr.size, OFFLINE_BLOCK)] + [after]:
+        f = tracker.process(block)
+        ends.append(f.end_sample)
         levels.append(f.level_db)
         powers.append(tracker.last_band_power)
-    f = tracker.process(after)
-    levels.append(f.level_db)
-    powers.append(tracker.last_band_power)
-    level = np.concatenate(levels)[:n_frames]
-    power = np.concatenate(powers)[:n_frames]
+    first = int(np.searchsorted(np.concatenate(ends), before.size + window + delay))
+    level = np.concatenate(levels)[first : first + n_frames]
+    every = np.concatenate(powers)[first:]
+    rows = np.clip(np.arange(n_frames)[:, np.newaxis] + shift[np.newaxis, :], 0, every.shape[0] - 1)
+    power = np.take_along_axis(every, rows, axis=0)
     return window, hop, power, level

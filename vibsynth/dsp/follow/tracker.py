@@ -219,7 +219,9 @@ class Tracker:
         ends = (ends_abs - start).astype(np.intp)
         level, balance, strength, drive = self._analyse(y, ends)
         intensity, gate = self._map(level, drive)
-        onset = np.where(gate, strength * np.maximum(intensity, 0.25), 0.0) if self.params.transients else 0 * level
+        onset = np.where(gate, strength * np.maximum(intensity, 0.25), 0.0)
+        if not self.params.transients:
+            onset = np.zeros(level.size)
         self.frames_done += ends.size
         return TrackFrames(
             end_sample=ends_abs * self.factor // self.up,

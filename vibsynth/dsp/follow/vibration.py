@@ -143,6 +143,8 @@ class VibrationAnalyzer:
         centre = math.sqrt(INTENSITY_BAND_HZ[0] * INTENSITY_BAND_HZ[1])
         #: group delay of the 80-200 Hz filter at its centre (s)
         self.filter_delay_s = group_delay_s(self.level_filter.sos, centre, fs)
+        #: group delay of each band's filter at its centre (s): the 10 Hz band lags by ~0.2 s
+        self.band_delay_s = np.array([group_delay_s(sk, float(c), fs) for sk, c in zip(sos, basis.centres_hz)])
 
     def reset(self) -> None:
         self.level_filter.reset()
