@@ -18,7 +18,6 @@ from __future__ import annotations
 import json
 import os
 import queue
-import shutil
 import subprocess
 import sys
 import threading
@@ -35,7 +34,8 @@ from tests.e2e.jackutil import (
     portaudio_input_ports,
     portaudio_output_ports,
 )
-from tests.e2e.test_device_loss_e2e import DETECT_WITHIN_S, RESUME_WITHIN_S, JackServer, unavailable
+from tests.e2e.test_device_loss_e2e import DETECT_WITHIN_S, RESUME_WITHIN_S
+from tests.e2e.test_device_loss_e2e import jack as private_jack  # noqa: F401 - a fixture: a killable server
 from vibsynth.app.service import build_engine
 from vibsynth.engine.commands import SetKnob
 from vibsynth.engine.input_ring import frame_offset, output_stamp
@@ -50,7 +50,9 @@ FS = 48000
 #: Underflows an input window may have above the output-only baseline: PortAudio counts the
 #: dummy driver's own late wake-ups on a shared VM as underflows (0-2 per 10 s).
 SLACK = 3
-WINDOW_S = float(os.environ.get("VIBSYNTH_INPUT_WINDOW_S", "5"))
+WINDOW_S = float(os.environ.get("VIBSYNTH_INPUT_WINDOW_S", "2.5"))
+#: Windows of each kind (alone, with the input), alternated.
+ROUNDS = 4
 
 
 def new_ports(before: set[str]) -> list[str]:
@@ -160,38 +162,61 @@ def test_input_ports_stand_beside_the_output_and_carry_a_signal_sample_exact(out
     assert output.state == "streaming"
 
 
+def _late_portaudio_cycles() -> int:
+    """Cycles jackd logged PortAudio's client as not finished (with_jack.sh's log), -1 without the log."""
+    log = Path(f"/tmp/jackd-{os.environ.get('JACK_DEFAULT_SERVER', '')}.log")
+    return log.read_text(errors="replace").count("client = PortAudio was not finished") if log.is_file() else -1
+
+
 def test_an_input_beside_the_output_adds_no_underflows(output):
+    """Windows with the output alone and with an input (and its reader) beside it, alternated: the
+    machine's own load drifts during a run, so each kind gets the same share of it."""
     engine = output.engine
     time.sleep(0.5)  # past the start-up blocks
-    u0 = engine.stats.underflows
-    time.sleep(WINDOW_S)
-    baseline = engine.stats.underflows - u0
-
-    inp = SoundDeviceInput("system:1,2", fs=FS, host_api="JACK", block_size=128)
-    inp.open()
-    reader = Reader(inp)
-    reader.keep = False
-    reader.start()
-    try:
-        time.sleep(0.5)
-        u1, c1 = engine.stats.underflows, inp.ring.callbacks
-        inp.ring.take_load_peak()
-        time.sleep(WINDOW_S)
-        with_input = engine.stats.underflows - u1
-        callbacks = inp.ring.callbacks - c1
-        load_avg, load_peak = inp.ring.load_avg, inp.ring.take_load_peak()
-    finally:
-        reader.stop.set()
-        reader.join()
-        inp.close()
+    totals = {"alone": 0, "input": 0}
+    late = {"alone": 0, "input": 0}
+    callbacks = overflows = 0
+    loads: list[float] = []
+    peaks: list[float] = []
+    for _ in range(ROUNDS):
+        for kind in ("alone", "input"):
+            inp = reader = None
+            if kind == "input":
+                inp = SoundDeviceInput("system:1,2", fs=FS, host_api="JACK", block_size=128)
+                inp.open()
+                reader = Reader(inp)
+                reader.keep = False
+                reader.start()
+            try:
+                time.sleep(0.5)  # past opening
+                u0, l0 = engine.stats.underflows, _late_portaudio_cycles()
+                c0 = inp.ring.callbacks if inp else 0
+                if inp:
+                    inp.ring.take_load_peak()
+                time.sleep(WINDOW_S)
+                totals[kind] += engine.stats.underflows - u0
+                late[kind] += _late_portaudio_cycles() - l0
+                if inp:
+                    callbacks += inp.ring.callbacks - c0
+                    overflows += inp.ring.overflows
+                    loads.append(inp.ring.load_avg)
+                    peaks.append(inp.ring.take_load_peak())
+            finally:
+                if reader is not None:
+                    reader.stop.set()
+                    reader.join()
+                if inp is not None:
+                    inp.close()
     period_us = 1e6 * 128 / FS
+    load = float(np.mean(loads))
     print(
-        f"\nunderflows per {WINDOW_S:g} s: output alone {baseline}, with a 2-channel input {with_input}; input "
-        f"callbacks {callbacks}, overflows {inp.ring.overflows}; input callback {load_avg * period_us:.2f} us per "
-        f"128-frame block on average ({100 * load_avg:.3f} % of the period), peak {load_peak * period_us:.1f} us"
+        f"\nunderflows over {ROUNDS} x {WINDOW_S:g} s: output alone {totals['alone']}, with a 2-channel input "
+        f"{totals['input']} (jackd: PortAudio's client late {late['alone']} vs {late['input']} cycles); input "
+        f"callbacks {callbacks}, overflows {overflows}; input callback {load * period_us:.2f} us per 128-frame "
+        f"block on average ({100 * load:.3f} % of the period), peak {max(peaks) * period_us:.1f} us"
     )
-    assert with_input <= baseline + SLACK, f"baseline {baseline}, with the input {with_input}"
-    assert inp.ring.overflows == 0 and callbacks > 0.9 * WINDOW_S * FS / 128
+    assert totals["input"] <= totals["alone"] + SLACK, totals
+    assert overflows == 0 and callbacks > 0.9 * ROUNDS * WINDOW_S * FS / 128
 
 
 def test_a_loop_from_the_output_back_to_the_input_is_bit_exact_and_its_latency_measured(output):
@@ -374,23 +399,9 @@ class Child:
                 self.proc.wait()
 
 
-@pytest.fixture
-def private_jack(tmp_path):
-    for tool in ("jackd", "jack_wait"):
-        if shutil.which(tool) is None:
-            unavailable(f"{tool} not found (Debian package jackd2)")
-    try:
-        import jack as _jack  # noqa: F401
-    except Exception as exc:  # noqa: BLE001 - JACK-Client or libjack missing
-        unavailable(f"JACK-Client is not usable ({exc})")
-    server = JackServer(f"vibsynth-input-loss-{os.getpid()}", tmp_path / "jackd.log")
-    server.start()
-    yield server
-    server.stop()
-
-
-def test_input_reports_a_dead_server_and_recovers_with_the_output(private_jack, tmp_path, config):
-    child = Child(dict(private_jack.env, PYTHONPATH=str(ROOT)), Path(config.bank.cache_dir), tmp_path / "child.log")
+def test_input_reports_a_dead_server_and_recovers_with_the_output(request, tmp_path, config):
+    jack = request.getfixturevalue("private_jack")  # its own jackd (dummy driver, 2 capture ports), killed below
+    child = Child(dict(jack.env, PYTHONPATH=str(ROOT)), Path(config.bank.cache_dir), tmp_path / "child.log")
     try:
         child.wait(lambda d: d.get("input") == "open" and d.get("output") == "streaming", 120.0, "both streaming")
         child.send("play")
@@ -398,7 +409,7 @@ def test_input_reports_a_dead_server_and_recovers_with_the_output(private_jack, 
         checked, bad, gaps = child.check()
         assert checked > 48000 and exact_but_for_xruns(bad, checked, gaps, 2), (checked, bad, gaps)
 
-        killed = private_jack.kill()
+        killed = jack.kill()
         line, seen = child.wait(lambda d: d.get("input") in ("lost", "retrying"), 5.0, "the input lost")
         detect = seen - killed
         assert line["reason"] == "JACK server shut down"
@@ -406,7 +417,7 @@ def test_input_reports_a_dead_server_and_recovers_with_the_output(private_jack, 
         time.sleep(2.0)
         assert child.last["input"] in ("lost", "retrying")
 
-        back = private_jack.start()
+        back = jack.start()
         line, seen = child.wait(
             lambda d: d.get("input") == "open" and d.get("output") == "streaming", RESUME_WITHIN_S + 5.0, "both back"
         )

@@ -13,14 +13,13 @@ import pytest
 from scipy.io import wavfile
 from scipy.signal import resample_poly
 
-from vibsynth.engine import outputs, pa_stream
 from vibsynth.engine.engine import Engine
 from vibsynth.engine.inputs import FileInput, SoundDeviceInput, level_db, open_input, parse_input_spec
 from vibsynth.engine.outputs import SoundDeviceOutput
 from vibsynth.engine.supervisor import LOST, STREAMING
 from vibsynth.errors import DeviceError, InputError, ParameterError
 
-from .test_supervisor import ALSA_API, JACK_API, Clock, FakeSd, World, pump
+from .test_supervisor import ALSA_API, JACK_API, Clock, World, install_fake_portaudio, pump
 from .waiting import wait_until
 
 JACK_SYSTEM = {"name": "system", "hostapi": 1, "max_output_channels": 2, "max_input_channels": 8}
@@ -52,12 +51,7 @@ def world():
 
 @pytest.fixture
 def sd(world, tmp_path, monkeypatch):
-    libfile = tmp_path / "libportaudio.so.2"
-    libfile.write_bytes(b"\x7fELF fake")
-    fake = FakeSd(world, str(libfile))
-    monkeypatch.setattr(outputs, "import_sounddevice", lambda: fake)
-    monkeypatch.setattr(pa_stream, "import_sounddevice", lambda: fake)
-    return fake
+    return install_fake_portaudio(world, tmp_path, monkeypatch)
 
 
 def capture(inp: SoundDeviceInput, blocks: int = 3, frames: int = 64) -> np.ndarray:

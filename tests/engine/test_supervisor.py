@@ -178,13 +178,18 @@ def world():
     w.hang.set()  # release abandoned threads
 
 
-@pytest.fixture
-def sd(world, tmp_path, monkeypatch):
+def install_fake_portaudio(world: World, tmp_path, monkeypatch) -> FakeSd:
+    """A fake sounddevice over ``world``, standing in for the real one in the output and the input."""
     libfile = tmp_path / "libportaudio.so.2"
     libfile.write_bytes(b"\x7fELF fake")
     fake = FakeSd(world, str(libfile))
     monkeypatch.setattr(outputs, "import_sounddevice", lambda: fake)
     return fake
+
+
+@pytest.fixture
+def sd(world, tmp_path, monkeypatch):
+    return install_fake_portaudio(world, tmp_path, monkeypatch)
 
 
 def make_output(small_bank, host_api, clock, **kw) -> SoundDeviceOutput:

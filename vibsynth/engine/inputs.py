@@ -31,6 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from vibsynth.engine import outputs
 from vibsynth.engine.input_ring import MAX_INPUT_CHANNELS, InputRing
 from vibsynth.engine.outputs import resolve_device
 from vibsynth.engine.pa_stream import PortAudioStream
@@ -239,6 +240,9 @@ class SoundDeviceInput(PortAudioStream):
             backoff=backoff,
             clock=clock,
         )
+
+    def _import_sounddevice(self) -> ModuleType:
+        return outputs.import_sounddevice()  # the output's, so one stand-in serves both in tests
 
     @property
     def fs(self) -> float:
