@@ -3,6 +3,7 @@
 Flow (one direction, each layer knows only the one below)::
 
     OSC / MIDI adapters, preset watcher  ->  Controller  ->  Engine.submit
+    follow (input ring -> tracker worker) ->  Controller
     output backend (audio thread)        ->  Engine.render_into
 
 :func:`build_engine` and :func:`open_output` are usable on their own (tests,
@@ -191,6 +192,16 @@ def _studio(settings: VibsynthConfig, args: Any, controller: Controller, library
     return studio
 
 
+def _follow(settings: VibsynthConfig, controller: Controller, servers: list[Any]) -> None:
+    """Start live Follow (``follow:``, ``serve --follow``) when it is on: the input and the follower."""
+    from vibsynth.control.follow import service
+
+    follow = service.create(settings, controller)
+    if follow is not None:
+        follow.start()
+        servers.append(follow)
+
+
 def _announce_studio(studio: Any, args: Any, out: Any) -> None:
     """Print the studio's URL line (with its token); ``vibsynth studio`` also opens a browser."""
     from vibsynth.control.studio.adapter import open_in_browser
@@ -295,6 +306,7 @@ def _serve(settings: VibsynthConfig, args: Any, stop: threading.Event, owns_proc
             if server is not None:
                 server.start()
                 servers.append(server)
+        _follow(settings, controller, servers)
         studio = _studio(settings, args, controller, library, servers)
         if library is not None and watcher_cls is not None and settings.presets.watch:
             watcher = watcher_cls(library, on_change=lambda name: controller.reapply_preset(name), interval_s=0.5)

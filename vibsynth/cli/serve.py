@@ -25,6 +25,10 @@ Outputs: auto (PortAudio, else a silent null output with a warning), sounddevice
 (PortAudio; an error if it cannot be opened), null (no sound card), wav (-o FILE
 --seconds N: rendered faster than real time).
 
+--follow DEVICE[:CH,...] or --follow FILE.wav follows a sound or vibration live: the
+texture tracks its level, brightness and onsets (--follow-mode vibration|audio,
+--follow-focus all|effects|bass|beat; docs/follow.md).
+
 A lost audio device (unplugged, JACK server stopped) does not stop the service:
 OSC/MIDI keep working, /status and the status line say "device lost: <reason>",
 and it retries every 0.25-2 s until the device is back, with the same knobs.
@@ -77,6 +81,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--seconds", type=_seconds, metavar="S", help="stop after S seconds")
     p.add_argument("-o", dest="wav", metavar="FILE.wav", help="file of the wav output")
+    _add_follow_arguments(p)
     from vibsynth.control import adapter_modules
 
     for module in adapter_modules():
@@ -86,10 +91,37 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     studio_adapter.add_arguments(p)
 
 
+def _add_follow_arguments(p: argparse.ArgumentParser) -> None:
+    """``--follow DEVICE[:CH,...]|FILE.wav``, ``--follow-mode``, ``--follow-focus`` (the ``follow:`` section)."""
+    group = p.add_argument_group("follow (docs/follow.md)")
+    group.add_argument(
+        "--follow",
+        type=flag_type("follow.device"),
+        metavar="DEVICE[:CH,...]|FILE.wav",
+        help="follow this input live: a device (name substring or index, then 1-based inputs; on JACK, "
+        "serve's own in_N ports) or a WAV file played in step with the output (default: follow.device "
+        "when follow.enabled)",
+    )
+    group.add_argument(
+        "--follow-mode", choices=flag_choices("follow.mode"), default=None, help="default follow.mode (vibration)"
+    )
+    group.add_argument(
+        "--follow-focus",
+        choices=flag_choices("follow.focus"),
+        default=None,
+        help="audio mode: what shakes (default follow.focus, all)",
+    )
+
+
 def _settings(args: argparse.Namespace) -> VibsynthConfig:
     """The typed settings of a ``serve`` (file, environment, ``--set`` and the flags), built once here."""
     extra = {"audio.channels": args.channels, "audio.backend": args.output, "audio.device": args.device}
     extra["layout"] = getattr(args, "layout", None)  # --layout (control/spatial/adapter.py)
+    follow = getattr(args, "follow", None)
+    extra.update({"follow.device": follow, "follow.enabled": True if follow is not None else None})
+    extra.update(
+        {"follow.mode": getattr(args, "follow_mode", None), "follow.focus": getattr(args, "follow_focus", None)}
+    )
     if args.wav and args.output is None:
         extra["audio.backend"] = "wav"
     from vibsynth.settings.config import settings_from_args

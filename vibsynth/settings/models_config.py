@@ -18,6 +18,7 @@ from vibsynth.dsp.filterbank import MIN_RATE_HZ
 from vibsynth.limits import GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
+from vibsynth.settings.models_follow import Follow
 from vibsynth.settings.models_lab import Lab
 from vibsynth.settings.models_midi_clips import MidiClips
 from vibsynth.settings.models_sources import Sources, knob_conflict
@@ -423,6 +424,9 @@ class VibsynthConfig(SettingsModel):
     )
     sources: Sources = Field(default_factory=Sources, description="touch sources mixed onto the layout (docs/vr.md)")
     lab: Lab = Field(default_factory=Lab, description="the perception lab: sessions folder, the protocols' defaults")
+    follow: Follow = Field(
+        default_factory=Follow, description="follow a sound or vibration input live (docs/follow.md)"
+    )
 
     @model_validator(mode="after")
     def _cross_check(self, info: ValidationInfo) -> VibsynthConfig:
@@ -482,6 +486,14 @@ class VibsynthConfig(SettingsModel):
                     f"midi_clips.notes[{i}].channels = {entry.channels}: actuator channel {max(entry.channels)} "
                     f"but audio.channels = {channels} (allowed: 1..{channels})",
                     "midi_clips.notes",
+                    "audio.channels",
+                )
+        for i, route in enumerate(self.follow.routes):
+            if route.channel is not None and route.channel > channels:
+                raise cross_problem(
+                    f"follow.routes[{i}].channel = {route.channel}: but audio.channels = {channels} "
+                    f"(allowed: 1..{channels})",
+                    "follow.routes",
                     "audio.channels",
                 )
         spatial_error = inline_layout_problem(self) or knob_conflict(self.sources, self.midi.mapping)

@@ -53,7 +53,7 @@ from vibsynth.control.osc.replies import (
 )
 from vibsynth.control.osc.speed import SpeedCurve
 from vibsynth.control.osc.workers import Notifier, PeerLike, SyncWorker, setter_message
-from vibsynth.control.status import channel_status, engine_status, output_status
+from vibsynth.control.status import channel_status, engine_status, follow_status, output_status
 from vibsynth.control.tap import InputTap
 from vibsynth.errors import ClipError, ParameterError, PresetError, ScheduleFullError, VibsynthError
 
@@ -527,7 +527,7 @@ class OscHandler:
         if self.extra_status is not None:
             pairs.extend(self.extra_status())
         pairs += [("replies_truncated", self.stats.replies_truncated), ("replies_dropped", self.stats.replies_dropped)]
-        return pairs + channel_status(ctl) + clip_status(ctl)
+        return pairs + channel_status(ctl) + clip_status(ctl) + follow_status(ctl, fit_osc_string)
 
     def _on_status(self, msg: Message, channels, peer, at_frame) -> None:
         args: list[object] = []
