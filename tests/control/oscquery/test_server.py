@@ -1,0 +1,196 @@
+"""The OSCQuery server over HTTP and WebSocket: queries and their status codes, LISTEN pushes, bad input."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import urllib.error
+import urllib.request
+from typing import Any
+
+import aiohttp
+import pytest
+
+from vibsynth.control.osc.codec import decode_packet, encode_message
+from vibsynth.settings.allow_list import parse_allow_list
+
+
+def get(server, target: str, host: str | None = None) -> tuple[int, Any]:
+    request = urllib.request.Request(f"http://127.0.0.1:{server.port}{target}")
+    if host is not None:
+        request.add_header("Host", host)
+    try:
+        with urllib.request.urlopen(request, timeout=5) as response:
+            body = response.read()
+            return response.status, json.loads(body) if body else None
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.read().decode()
+
+
+def test_queries_answer_per_the_proposal(server, ctl):
+    ctl.set_knob("intensity", 0.375, channels=(1,))
+    status, root = get(server, "/")
+    assert status == 200 and root["FULL_PATH"] == "/" and "vibsynth" in root["CONTENTS"]
+    status, node = get(server, "/vibsynth/ch/2/intensity")
+    assert status == 200 and node["TYPE"] == "f" and node["ACCESS"] == 3 and node["VALUE"] == [0.375]
+    assert get(server, "/vibsynth/ch/2/intensity?VALUE") == (200, {"VALUE": [0.375]})
+    assert get(server, "/vibsynth/ch/2/intensity?RANGE") == (200, {"RANGE": [{"MIN": 0, "MAX": 1}]})
+    assert get(server, "/vibsynth/sync?VALUE")[0] == 204  # a trigger holds no value
+    assert get(server, "/vibsynth/ch?TYPE")[0] == 204  # a container has no type
+    assert get(server, "/vibsynth/ch/2/intensity?NOPE")[0] == 400
+    assert get(server, "/vibsynth/ch/2/intensity?VALUE&TYPE")[0] == 400
+    assert get(server, "/vibsynth/ch/9/intensity")[0] == 404
+    status, info = get(server, "/anything?HOST_INFO")
+    assert status == 200 and info["NAME"] == "vibsynth test" and info["OSC_PORT"] == 9570
+    assert info["OSC_TRANSPORT"] == "UDP" and info["WS_PORT"] == server.port and info["OSC_IP"] == "127.0.0.1"
+    assert info["EXTENSIONS"]["LISTEN"] and info["EXTENSIONS"]["VALUE"] and not info["EXTENSIONS"]["CLIPMODE"]
+
+
+def test_host_size_and_depth_bounds_refuse_once_and_change_nothing(server, ctl):
+    before = ctl.state()
+    assert get(server, "/", host=f"evil.example:{server.port}")[0] == 403  # DNS rebinding
+    assert get(server, "/", host="127.0.0.1:1")[0] == 403
+    assert get(server, "/", host=f"localhost:{server.port}")[0] == 200
+    assert get(server, "/" + "a" * 2000)[0] == 414
+    assert get(server, "/a" * 40)[0] == 400
+    refused = server.refused()
+    assert refused["host"] == 2 and refused["too_large"] == 1 and refused["too_deep"] == 1
+    assert ctl.state() == before
+    assert ctl.error_counts["oscquery.host"] == 2
+
+
+async def _ws(server, **kwargs):
+    session = aiohttp.ClientSession()
+    ws = await session.ws_connect(f"http://127.0.0.1:{server.port}/", **kwargs)
+    return session, ws
+
+
+async def _next_osc(ws, timeout=2.0):
+    while True:
+        msg = await ws.receive(timeout=timeout)
+        if msg.type == aiohttp.WSMsgType.BINARY:
+            return decode_packet(msg.data)
+        if msg.type == aiohttp.WSMsgType.TEXT:
+            return json.loads(msg.data)
+        raise AssertionError(f"socket closed: {msg}")
+
+
+def test_listen_streams_values_from_any_side_and_ignore_stops(server, ctl, handler):
+    async def run():
+        session, ws = await _ws(server)
+        try:
+            await ws.send_str(json.dumps({"COMMAND": "LISTEN", "DATA": "/vibsynth/ch/1/intensity"}))
+            first = await _next_osc(ws)
+            assert first.address == "/vibsynth/ch/1/intensity" and first.args == (0.0,)
+            # over OSC (the handler, as the UDP transport calls it)
+            handler.handle_batch([(encode_message("/vibsynth/ch/1/intensity", (0.5,), "f"), _Null())])
+            moved = await _next_osc(ws)
+            assert moved.address == "/vibsynth/ch/1/intensity" and moved.args == (0.5,) and moved.types == "f"
+            # from another side (the studio, MIDI, clips all go through the controller)
+            ctl.set_knob("intensity", 0.25, channels=(0,), source="studio")
+            assert (await _next_osc(ws)).args == (0.25,)
+            # a flood of moves arrives coalesced, the newest last
+            for i in range(2000):
+                ctl.set_knob("intensity", i / 2000, channels=(0,))
+            values = []
+            while not values or abs(values[-1] - 1999 / 2000) > 1e-6:
+                values.append((await _next_osc(ws)).args[0])
+            assert len(values) < 200
+            await ws.send_str(json.dumps({"COMMAND": "IGNORE", "DATA": "/vibsynth/ch/1/intensity"}))
+            await asyncio.sleep(0.1)
+            ctl.set_knob("intensity", 0.75, channels=(0,))
+            with pytest.raises(asyncio.TimeoutError):
+                await ws.receive(timeout=0.3)
+        finally:
+            await ws.close()
+            await session.close()
+
+    asyncio.run(run())
+
+
+def test_binary_frames_are_osc_packets_with_replies(server, ctl):
+    async def run():
+        session, ws = await _ws(server)
+        try:
+            await ws.send_bytes(encode_message("/vibsynth/ch/3/balance", (1.25,), "f"))
+            await ws.send_bytes(encode_message("/vibsynth/ch/3/get", ("balance",), "s"))
+            reply = await _next_osc(ws)
+            assert reply.address == "/vibsynth/ch/3/balance" and reply.args == (1.25,)
+            await ws.send_bytes(encode_message("/vibsynth/ch/3/balance", (99.0,), "f"))
+            error = await _next_osc(ws)
+            assert error.address == "/vibsynth/error"
+        finally:
+            await ws.close()
+            await session.close()
+
+    asyncio.run(run())
+    assert ctl.state()[2].balance == 1.25
+
+
+def test_osc_over_websocket_keeps_the_allow_list(server, ctl):
+    server.allow = parse_allow_list(["10.1.2.3"])
+
+    async def run():
+        session, ws = await _ws(server)
+        try:
+            await ws.send_bytes(encode_message("/vibsynth/intensity", (0.5,), "f"))
+            answer = await _next_osc(ws)
+            assert answer["COMMAND"] == "ERROR" and "osc.allow" in answer["DATA"]
+        finally:
+            await ws.close()
+            await session.close()
+
+    asyncio.run(run())
+    assert ctl.state()[0].intensity == 0.0 and server.refused()["not_allowed"] == 1
+
+
+def test_bad_websocket_input_is_refused_once_each_and_changes_nothing(server, ctl):
+    before = ctl.state()
+
+    async def run():
+        session, ws = await _ws(server)
+        try:
+            await ws.send_str("not json")
+            assert (await _next_osc(ws))["COMMAND"] == "ERROR"
+            await ws.send_str("[" * 5000 + "]" * 5000)  # deeply nested, within the size bound
+            assert (await _next_osc(ws))["COMMAND"] == "ERROR"
+            await ws.send_str(json.dumps({"COMMAND": "LISTEN", "DATA": "/no/such"}))
+            assert "no OSC method" in (await _next_osc(ws))["DATA"]
+            await ws.send_bytes(b"\x00garbage")  # a malformed OSC packet: counted by the handler
+            # a LISTEN flood over the per-client bound: the first 256 are taken
+            paths = [p for p in server.tree.methods if server.tree.methods[p].value is not None]
+            for k in range(300):
+                await ws.send_str(json.dumps({"COMMAND": "LISTEN", "DATA": paths[k % len(paths)] + ("" if k < len(paths) else "x")}))
+            await asyncio.sleep(0.3)
+            # still served
+            await ws.send_str(json.dumps({"COMMAND": "IGNORE", "DATA": paths[0]}))
+            await ws.send_str(json.dumps({"COMMAND": "LISTEN", "DATA": paths[0]}))
+        finally:
+            await ws.close()
+            await session.close()
+        # a frame over the size bound closes that socket only (counted)
+        session, ws = await _ws(server)
+        try:
+            await ws.send_str("x" * 20000)
+            msg = await ws.receive(timeout=2)
+            assert msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.CLOSING)
+        finally:
+            await session.close()
+        # a foreign page's socket is refused at the handshake
+        with pytest.raises(aiohttp.WSServerHandshakeError):
+            await _ws(server, headers={"Origin": "http://evil.example"})
+
+    asyncio.run(run())
+    refused = server.refused()
+    assert refused["malformed"] == 2 and refused["unknown_path"] >= 1 and refused["origin"] == 1
+    assert refused["too_large"] == 1
+    assert ctl.state() == before
+    assert get(server, "/vibsynth/ch/1/intensity?VALUE") == (200, {"VALUE": [0.0]})
+
+
+class _Null:
+    address = ("127.0.0.1", 1)
+    key = ("null",)
+
+    def send(self, data: bytes) -> bool:
+        return True
