@@ -8,6 +8,8 @@ a counter the test advances.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 from scipy.io import wavfile
@@ -16,11 +18,12 @@ from scipy.signal import resample_poly
 from vibsynth.engine.engine import Engine
 from vibsynth.engine.inputs import FileInput, SoundDeviceInput, level_db, open_input, parse_input_spec
 from vibsynth.engine.outputs import SoundDeviceOutput
+from vibsynth.engine.pa_runtime import shared_runtime
 from vibsynth.engine.supervisor import LOST, STREAMING
 from vibsynth.errors import DeviceError, InputError, ParameterError
 
 from .test_supervisor import ALSA_API, JACK_API, Clock, World, install_fake_portaudio, pump
-from .waiting import wait_until
+from .waiting import returns, wait_until
 
 JACK_SYSTEM = {"name": "system", "hostapi": 1, "max_output_channels": 2, "max_input_channels": 8}
 ALSA_MIC = {"name": "USB mic: Audio (hw:2,0)", "hostapi": 0, "max_output_channels": 0, "max_input_channels": 2}
@@ -237,6 +240,27 @@ def test_a_dead_jack_server_takes_both_and_one_rescan_brings_both_back(small_ban
     assert len(live) == 2 and all(s.lib is sd._lib for s in live)
     inp.close()
     out.stop()
+
+
+def test_exit_never_waits_for_another_streams_retry(sd, world):
+    """A retry holds the runtime's lock while it re-scans and opens: shutdown does not wait for it."""
+    runtime = shared_runtime(sd)
+    held, release = threading.Event(), threading.Event()
+
+    def retry() -> None:
+        with runtime.lock:
+            held.set()
+            release.wait()
+
+    thread = threading.Thread(target=retry)
+    thread.start()
+    try:
+        held.wait()
+        assert returns(runtime.shutdown, "shutdown while a retry holds the lock") is False
+        assert sd._initialized == 0  # sounddevice's exit hook disarmed: the process ends with os._exit
+    finally:
+        release.set()
+        thread.join()
 
 
 # ---------------------------------------------------------------------- file input

@@ -399,18 +399,21 @@ class PortAudioRuntime:
     def shutdown(self) -> bool:
         """At process exit: terminate PortAudio if that is safe, else disarm sounddevice's exit hook.
 
-        Returns True if PortAudio was terminated cleanly. False: it was dirty or
-        ``Pa_Terminate`` hung; the process should then end with ``os._exit`` (libjack's
+        Returns True if PortAudio was terminated cleanly. False: it was dirty, a stream's
+        re-scan or open was still under way (it holds :attr:`lock`: never waited for at exit),
+        or ``Pa_Terminate`` hung; the process should then end with ``os._exit`` (libjack's
         exit-time destructors crash with a client whose server died).
         """
-        if self.dirty:
+        if self.dirty or not self.lock.acquire(timeout=LOCK_WAIT_S):
             self.sd._initialized = 0  # its atexit handler would call Pa_Terminate: abort or hang
             return False
         try:
-            self.terminate()
+            self._terminate()
         except HungCallError:
             self.sd._initialized = 0
             return False
+        finally:
+            self.lock.release()
         return not _KEEP_ALIVE  # retired instances/streams: libjack may still hold their clients
 
 
