@@ -15,6 +15,7 @@ import pytest
 from scipy.io import wavfile
 from scipy.signal import resample_poly
 
+from vibsynth.engine import outputs
 from vibsynth.engine.engine import Engine
 from vibsynth.engine.inputs import FileInput, SoundDeviceInput, level_db, open_input, parse_input_spec
 from vibsynth.engine.outputs import SoundDeviceOutput
@@ -121,6 +122,13 @@ def test_a_name_ending_in_numbers_is_found_whole(sd, world):
     assert inp.channels == (1, 2)  # a name, not "(hw" with channels 2,0
     assert sd.streams[-1].kwargs["device"] == 1 and sd.streams[-1].kwargs["channels"] == 2
     inp.close()
+
+
+def test_input_devices_are_listed_apart_from_outputs(sd, world):
+    _, ins = outputs.list_devices("input")
+    _, outs = outputs.list_devices()
+    assert [d["name"] for d in ins] == [ALSA_MIC["name"], "system"]
+    assert [d["name"] for d in outs] == [ALSA_OUT["name"], "system"]
 
 
 # ---------------------------------------------------------------------- device input

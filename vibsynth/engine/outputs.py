@@ -192,11 +192,11 @@ def resolve_device(
     return matches[0]
 
 
-def list_devices() -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """Host APIs and output devices (as dicts); raises DeviceError without PortAudio."""
+def list_devices(kind: str = "output") -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Host APIs and the ``kind`` (output or input) devices (as dicts); raises DeviceError without PortAudio."""
     sd = import_sounddevice()
     apis = [dict(a, index=i) for i, a in enumerate(sd.query_hostapis())]
-    devices = [dict(d, index=i) for i, d in enumerate(sd.query_devices()) if d["max_output_channels"] > 0]
+    devices = [dict(d, index=i) for i, d in enumerate(sd.query_devices()) if d.get(f"max_{kind}_channels", 0) > 0]
     return apis, devices
 
 
