@@ -270,6 +270,42 @@ def test_a_loop_from_the_output_back_to_the_input_is_bit_exact_and_its_latency_m
     assert abs(lag - predicted) <= 8 + spread
 
 
+def test_a_file_input_runs_in_step_with_the_output_clock(output, tmp_path):
+    """FileInput is paced by the engine's frames on JACK, not by the wall clock: always `lead` ahead."""
+    from scipy.io import wavfile
+    from scipy.signal import resample_poly
+
+    from vibsynth.engine.inputs import FileInput
+
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-0.5, 0.5, (3 * 44100, 2)).astype(np.float32)
+    path = tmp_path / "demo.wav"
+    wavfile.write(path, 44100, x)
+    engine = output.engine
+    inp = FileInput(path, fs=FS, frame_clock=lambda: int(engine.frame_position), lead_frames=512)
+    got, ahead = [], []
+    inp.open()
+    start = engine.frame_position
+    try:
+        for _ in range(100):  # 1 s
+            time.sleep(0.01)
+            ahead.append(inp.ring.frames_captured - (engine.frame_position - start))
+            got.append(inp.ring.read())
+    finally:
+        inp.close()
+    got.append(inp.ring.read())
+    y = np.concatenate(got)
+    ref = resample_poly(x.astype(np.float64), 160, 147, axis=0)[: y.shape[0]]
+    print(
+        f"\nfile input on the output clock: {y.shape[0]} frames in 1 s; frames ahead of the output: "
+        f"median {np.median(ahead):.0f}, min {min(ahead)}, max {max(ahead)} (lead 512)"
+    )
+    np.testing.assert_allclose(y, ref, atol=1e-6)
+    assert 0.9 * FS < y.shape[0] < 1.2 * FS
+    # ahead of the output by the lead, less what the output rendered since the feeder's last wake-up
+    assert max(ahead) <= 512 + 128 and np.median(ahead) > 0
+
+
 # ---------------------------------------------------------------------- server death
 _CHILD = r"""
 import json, sys, threading, time
