@@ -10,8 +10,9 @@ extras=""
 
 # gcc + python3-dev build the compiled real-time core (vibsynth/engine/_core.c) at pip install.
 apt_packages="libportaudio2 jackd2 liblo-tools python3-venv python3-dev gcc"
-# --test: a real browser for the studio's end-to-end tests, and mono to compile and run the C# client.
-[ -n "$extras" ] && apt_packages="$apt_packages chromium chromium-driver mono-mcs mono-runtime"
+# --test: a real browser for the studio's end-to-end tests, mono to compile and run the C# client,
+# iproute2 (ip) for the discovery tests' private network namespaces.
+[ -n "$extras" ] && apt_packages="$apt_packages chromium chromium-driver mono-mcs mono-runtime iproute2"
 missing=""
 for p in $apt_packages; do
   dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"

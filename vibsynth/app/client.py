@@ -721,6 +721,43 @@ class Client(_Commands):
         address = self._sock.getsockname()
         return str(address[0]), int(address[1])
 
+    @classmethod
+    def discover(
+        cls,
+        name: str | None = None,
+        *,
+        seconds: float = 2.0,
+        interfaces: Sequence[str] | None = None,
+        timeout: float = 1.0,
+    ) -> Client:
+        """A client of a vibsynth server found on the network (mDNS ``_oscjson._tcp`` + OSCQuery HOST_INFO).
+
+        Parameters
+        ----------
+        name : str, optional
+            Part of the service name to pick (default: the first server whose name holds "vibsynth").
+        seconds : float
+            How long to listen for services.
+        interfaces : sequence of str, optional
+            IP addresses to browse on (default: every interface).
+        timeout : float
+            The client's reply timeout.
+
+        Raises
+        ------
+        NoReplyError
+            No matching service answered within ``seconds``.
+        """
+        from vibsynth.control.oscquery.discovery import discover
+
+        wanted = (name or "vibsynth").lower()
+        found = [f for f in discover(seconds, interfaces=interfaces) if wanted in f.name.lower() and f.osc_port]
+        if not found:
+            raise NoReplyError(f"no OSCQuery service named like {wanted!r} found in {seconds:g} s (is serve running?)")
+        service = found[0]
+        assert service.osc_host is not None and service.osc_port is not None
+        return cls(service.osc_host, service.osc_port, timeout=timeout)
+
     @property
     def closed(self) -> bool:
         """True after :meth:`close`."""

@@ -202,6 +202,19 @@ def _follow(settings: VibsynthConfig, controller: Controller, servers: list[Any]
         servers.append(follow)
 
 
+def _oscquery(settings: VibsynthConfig, args: Any, controller: Controller, library: Any, servers: list[Any]) -> Any:
+    """Start OSCQuery and mDNS advertising (``discovery:``) for the running OSC server; None when off."""
+    from vibsynth.control.oscquery import adapter
+
+    osc = next((s for s in servers if getattr(s, "name", "") == "osc"), None)
+    clips = next((s for s in servers if getattr(s, "name", "") == "clips"), None)
+    service = adapter.create(settings, args, controller, osc, presets=library, clips=getattr(clips, "library", None))
+    if service is not None:
+        service.start()
+        servers.append(service)
+    return service
+
+
 def _announce_studio(studio: Any, args: Any, out: Any) -> None:
     """Print the studio's URL line (with its token); ``vibsynth studio`` also opens a browser."""
     from vibsynth.control.studio.adapter import open_in_browser
@@ -307,6 +320,7 @@ def _serve(settings: VibsynthConfig, args: Any, stop: threading.Event, owns_proc
                 server.start()
                 servers.append(server)
         _follow(settings, controller, servers)
+        oscquery = _oscquery(settings, args, controller, library, servers)
         studio = _studio(settings, args, controller, library, servers)
         if library is not None and watcher_cls is not None and settings.presets.watch:
             watcher = watcher_cls(library, on_change=lambda name: controller.reapply_preset(name), interval_s=0.5)
@@ -320,6 +334,8 @@ def _serve(settings: VibsynthConfig, args: Any, stop: threading.Event, owns_proc
             print(f"vibsynth: {server.describe()}", file=out)
         if studio is not None:
             _announce_studio(studio, args, out)
+        if oscquery is not None:
+            print(f"oscquery: {oscquery.server.url}", file=out, flush=True)
         prefix = settings.osc.prefix.rstrip("/")
         silent = all(k == 0 for k, _, _ in engine.knob_values()) and not intensity
         hint = "silent until a control arrives; " if silent else ""

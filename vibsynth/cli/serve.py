@@ -89,6 +89,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from vibsynth.control.studio import adapter as studio_adapter
 
     studio_adapter.add_arguments(p)
+    from vibsynth.control.oscquery import adapter as oscquery_adapter
+
+    oscquery_adapter.add_arguments(p)
 
 
 def _add_follow_arguments(p: argparse.ArgumentParser) -> None:

@@ -160,7 +160,9 @@ def test_bad_websocket_input_is_refused_once_each_and_changes_nothing(server, ct
             # a LISTEN flood over the per-client bound: the first 256 are taken
             paths = [p for p in server.tree.methods if server.tree.methods[p].value is not None]
             for k in range(300):
-                await ws.send_str(json.dumps({"COMMAND": "LISTEN", "DATA": paths[k % len(paths)] + ("" if k < len(paths) else "x")}))
+                await ws.send_str(
+                    json.dumps({"COMMAND": "LISTEN", "DATA": paths[k % len(paths)] + ("" if k < len(paths) else "x")})
+                )
             await asyncio.sleep(0.3)
             # still served
             await ws.send_str(json.dumps({"COMMAND": "IGNORE", "DATA": paths[0]}))

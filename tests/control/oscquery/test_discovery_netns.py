@@ -1,0 +1,53 @@
+"""Discovery end to end in a network namespace this test makes (multicast on its own loopback only).
+
+python-oscquery (an OSCQuery client written elsewhere) finds ``vibsynth serve`` over zeroconf
+and reads types, ranges and values that agree with ``get`` over OSC; ``vibsynth discover``
+and ``Client.discover`` find it; a second service with the same name is renamed once and
+counted, the first keeps answering.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.skipif(
+    os.geteuid() != 0 or shutil.which("unshare") is None or shutil.which("ip") is None,
+    reason="needs root, unshare and ip (iproute2) to make a network namespace",
+)
+
+SETUP = "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo"
+
+
+def test_python_oscquery_browses_the_service_in_a_private_namespace(tmp_path: Path):
+    peer = Path(__file__).with_name("netns_peer.py")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[3])}
+    env.pop("VIBSYNTH_CONFIG", None)
+    result = subprocess.run(
+        ["unshare", "-n", "bash", "-c", f'{SETUP} && exec "$0" "$1" "$2"', sys.executable, str(peer), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    out = json.loads(result.stdout.strip().splitlines()[-1])
+    assert out["banner"] == "oscquery: http://127.0.0.1:9572/"
+    assert out["host_info"] == {"name": "vibsynth netns", "osc_ip": "127.0.0.1", "osc_port": 9570}
+    assert "/vibsynth/ch/1/intensity" in out["paths"] and "/vibsynth/status" in out["paths"]
+    assert out["get"]["intensity"] == pytest.approx(out["tree"]["intensity"][0]) == pytest.approx(0.625)
+    assert out["get"]["balance"] == pytest.approx(out["tree"]["balance"][0]) == pytest.approx(-1.5)
+    assert out["raw"]["TYPE"] == "f" and out["raw"]["RANGE"][0]["MIN"] < -1.5 < out["raw"]["RANGE"][0]["MAX"]
+    assert {"name": "vibsynth netns", "osc": "udp://127.0.0.1:9570", "oscquery": "http://127.0.0.1:9572/"} in out[
+        "discover"
+    ]
+    assert out["client_discover"] == pytest.approx(0.625)  # Client.discover() reached the same server
+    assert out["first"] == {"conflicts": 0, "name": "rival"}
+    assert out["conflict"]["conflicts"] == 1 and out["conflict"]["name"] == "rival-2"
+    assert out["conflict"]["failed"] is None and out["after_conflict"] == 9570
