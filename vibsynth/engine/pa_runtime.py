@@ -224,8 +224,9 @@ class PortAudioRuntime:
     # -- streams sharing the instance -------------------------------------------------
     def attach(self, peer: StreamPeer) -> None:
         """Let ``peer``'s stream veto re-scans while it plays (held weakly)."""
-        self._peers = [ref for ref in self._peers if ref() is not None and ref() is not peer]
-        self._peers.append(weakref.ref(peer))
+        with self.lock:
+            self._peers = [ref for ref in self._peers if ref() is not None and ref() is not peer]
+            self._peers.append(weakref.ref(peer))
 
     def _peer_playing(self) -> bool:
         for ref in self._peers:
