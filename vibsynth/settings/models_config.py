@@ -18,6 +18,7 @@ from vibsynth.dsp.filterbank import MIN_RATE_HZ
 from vibsynth.limits import GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
+from vibsynth.settings.models_discovery import Discovery
 from vibsynth.settings.models_follow import Follow
 from vibsynth.settings.models_lab import Lab
 from vibsynth.settings.models_midi_clips import MidiClips
@@ -426,6 +427,9 @@ class VibsynthConfig(SettingsModel):
     lab: Lab = Field(default_factory=Lab, description="the perception lab: sessions folder, the protocols' defaults")
     follow: Follow = Field(
         default_factory=Follow, description="follow a sound or vibration input live (docs/follow.md)"
+    )
+    discovery: Discovery = Field(
+        default_factory=Discovery, description="OSCQuery and mDNS advertising of the OSC server (docs/osc.md)"
     )
 
     @model_validator(mode="after")

@@ -204,6 +204,14 @@ class OscHandler:
         self._methods.update(methods)
         self._getters.update(getters)
 
+    def method_names(self) -> frozenset[str]:
+        """The methods this handler answers (its own and the registered tables'): what discovery lists."""
+        return frozenset(self._methods)
+
+    def get_names(self) -> tuple[str, ...]:
+        """The names ``get`` answers (its own and the registered tables')."""
+        return (*_GET_FIELDS, *self._getters)
+
     def close(self) -> None:
         """Detach from the controller."""
         if self._unsubscribe is not None:
