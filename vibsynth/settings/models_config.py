@@ -266,9 +266,7 @@ class Midi(Section):
     )
     virtual: bool = setting(False, 'create a virtual input named "vibsynth"')
     mode: Literal["gate", "continuous"] = setting("gate", "gate | continuous")
-    release_ms: float = setting(
-        150.0, "release fade after note-off in gate mode", unit="ms", ge=0, le=GLIDE_MAX_MS
-    )
+    release_ms: float = setting(150.0, "release fade after note-off in gate mode", unit="ms", ge=0, le=GLIDE_MAX_MS)
     velocity_curve: float = setting(1.0, "intensity = (velocity/127) ** curve", ge=0.1, le=10)
     pitch_bend_range: float = setting(0.5, "balance offset at full bend", unit="(knob units)", ge=0, le=8)
     channel_map: Annotated[
