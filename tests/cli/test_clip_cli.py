@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from tests.formats.haptic_samples import ahap, curve, event, meta
@@ -161,3 +162,113 @@ def test_export_meta_haptic_and_import_it_back(tmp_path, capsys, isolated):
     blocked = tmp_path / "impact.haptic" / "x.haptic"  # its folder is a file
     code, _, err = run(capsys, "clip", "export", "impact", "--format", "haptic", "-o", str(blocked))
     assert code == 1 and err.startswith("vibsynth: error: ") and "cannot write" in err and err.count("\n") == 1
+
+
+# --------------------------------------------------------------------------- from-audio
+def _sound(path, seconds=1.5, seed=0, click=0.7, channels=1):
+    from scipy.io import wavfile
+
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal(int(seconds * 48000)) * 0.005
+    x[int(click * 48000)] += 0.9
+    wavfile.write(path, 48000, np.tile(x[:, None], (1, channels)).astype(np.float32))
+    return path
+
+
+def test_from_audio_writes_a_named_clip_a_file_and_refuses_to_overwrite(tmp_path, capsys, isolated):
+    src = _sound(tmp_path / "hit.wav", channels=2)
+    code, out, err = run(capsys, "clip", "from-audio", str(src), "-o", "hit")
+    assert code == 0 and out.startswith(f"wrote {isolated / 'hit.yaml'}: 1.50 s -> ") and "max error" in out
+    clip = load_clip(isolated / "hit.yaml")
+    assert clip.duration_ms == pytest.approx(1500) and "Followed from hit.wav (vibration mode)" in clip.description
+    assert any(abs(t.t_ms - 700) < 10 for t in clip.transients)
+    assert (isolated / "hit.yaml").read_text().startswith("# vibsynth clip made by clip from-audio from ")
+    code, out, _ = run(capsys, "clip", "list")
+    assert "hit" in out
+    code, _, err = run(capsys, "clip", "from-audio", str(src), "-o", "hit")
+    assert code == 1 and "exists already (use --force" in err and err.count("\n") == 1
+    code, out, _ = run(
+        capsys, "clip", "from-audio", str(src), "-o", str(tmp_path / "f.yaml"), "--mode", "audio", "--focus", "effects"
+    )
+    assert code == 0 and "audio mode, focus effects" in load_clip(tmp_path / "f.yaml").description
+    code, out, _ = run(capsys, "clip", "from-audio", str(src), "-o", str(tmp_path / "g.yaml"), "--max-keyframes", "3")
+    assert code == 0 and len(load_clip(tmp_path / "g.yaml").keyframes) <= 3 and "budget ran out" in out
+
+
+def test_from_audio_bad_files_write_nothing(tmp_path, capsys, isolated):
+    from scipy.io import wavfile
+
+    nan = np.zeros(4800, np.float32)
+    nan[2400] = np.nan
+    wavfile.write(tmp_path / "nan.wav", 48000, nan)
+    (tmp_path / "trunc.wav").write_bytes((_sound(tmp_path / "t.wav")).read_bytes()[:1000])
+    wavfile.write(tmp_path / "one.wav", 48000, np.zeros(1, np.int16))
+    cases = {
+        "nan.wav": "NaN or infinite sample at 0.050 s",
+        "trunc.wav": "truncated or corrupt",
+        "one.wav": "too short to follow",
+        "missing.wav": "no such file or folder",
+    }
+    for name, message in cases.items():
+        code, out, err = run(capsys, "clip", "from-audio", str(tmp_path / name), "-o", "x")
+        assert code == 1 and message in err and err.startswith("vibsynth: error: ") and err.count("\n") == 1, err
+    assert not isolated.exists() or not any(isolated.iterdir())
+    with pytest.raises(SystemExit) as info:
+        run(capsys, "clip", "from-audio", str(tmp_path / "t.wav"), "-o", "x", "--tolerance-db", "0")
+    assert info.value.code == 2 and "outside (0, 40] dB" in capsys.readouterr().err
+
+
+def test_from_audio_silence_says_so(tmp_path, capsys):
+    from scipy.io import wavfile
+
+    wavfile.write(tmp_path / "quiet.wav", 48000, np.zeros(48000, np.int16))
+    code, out, _ = run(capsys, "clip", "from-audio", str(tmp_path / "quiet.wav"), "-o", str(tmp_path / "q.yaml"))
+    assert code == 0 and "the input is silent: the clip is silence" in out
+    assert all(k.intensity == 0 for k in load_clip(tmp_path / "q.yaml").keyframes)
+
+
+def _folder(tmp_path):
+    folder = tmp_path / "sounds"
+    (folder / "sub").mkdir(parents=True)
+    _sound(folder / "a.wav", seed=1)
+    _sound(folder / "sub" / "B c.wav", seed=2, channels=2)
+    (folder / "garbage.wav").write_bytes(b"RIFF....WAVEnope")
+    (folder / "notes.txt").write_text("not a sound")
+    return folder
+
+
+def _check_folder_run(code, out, err, outdir):
+    assert code == 1
+    assert "vibsynth: error: " in err and "garbage.wav: not a readable WAV file" in err and err.count("\n") == 1
+    assert "2 of 3 files converted (1 failed)" in out
+    assert sorted(p.relative_to(outdir).as_posix() for p in outdir.rglob("*.yaml")) == ["a.yaml", "sub/B-c.yaml"]
+    clip = load_clip(outdir / "sub" / "B-c.yaml")
+    assert clip.name == "B-c" and any(abs(t.t_ms - 700) < 10 for t in clip.transients)
+
+
+def test_a_folder_converts_in_parallel_and_reports_each_failure(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    code, out, err = run(capsys, "clip", "from-audio", str(folder), "-o", str(tmp_path / "clips"), "--jobs", "2")
+    _check_folder_run(code, out, err, tmp_path / "clips")
+    assert "2 at a time" in out
+    code, _, err = run(capsys, "clip", "from-audio", str(folder), "-o", str(tmp_path / "clips" / "a.yaml"))
+    assert code == 2 and "needs an output folder" in err
+
+
+def test_a_folder_converts_on_a_dask_cluster(tmp_path, capsys):
+    distributed = pytest.importorskip("distributed")
+    folder = _folder(tmp_path)
+    with distributed.LocalCluster(
+        n_workers=2, processes=False, protocol="tcp", threads_per_worker=1, dashboard_address=None
+    ) as cluster:
+        address = cluster.scheduler_address
+        code, out, err = run(capsys, "clip", "from-audio", str(folder), "-o", str(tmp_path / "c"), "--dask", address)
+    _check_folder_run(code, out, err, tmp_path / "c")
+    assert f"on {address}" in out
+
+
+def test_import_to_a_file_takes_the_file_s_name(tmp_path, capsys):
+    src = tmp_path / "hit.haptic"
+    src.write_text(meta([{"time": 0, "amplitude": 0.5}, {"time": 0.2, "amplitude": 0.5}]))
+    code, out, _ = run(capsys, "clip", "import", str(src), "-o", str(tmp_path / "back.yaml"))
+    assert code == 0 and load_clip(tmp_path / "back.yaml").name == "back"

@@ -1,4 +1,5 @@
-"""The progress bar of offline renders (``render``, ``render --midi``, ``decode``): tqdm on stderr.
+"""The progress bar of offline renders (``render``, ``render --midi|--follow``, ``decode``, ``clip from-audio``):
+tqdm on stderr.
 
 Shown only when both stdout and stderr are a terminal and ``--quiet`` is not given, so a
 script, a pipe or a log file never receives bar characters. The renderer calls
@@ -68,6 +69,8 @@ class RenderProgress:
     enabled : bool, optional
         Force the bar on or off (tests); default: on when ``stream`` and ``sys.stdout``
         are terminals and not ``quiet``.
+    unit : {"s", "files"}
+        What the bar counts: seconds (``frames / fs``) or whole items (``fs`` 1).
 
     Notes
     -----
@@ -84,6 +87,7 @@ class RenderProgress:
         quiet: bool = False,
         stream: IO[str] | None = None,
         enabled: bool | None = None,
+        unit: str = "s",
     ) -> None:
         self.stream = stream if stream is not None else sys.stderr
         if enabled is None:
@@ -108,13 +112,25 @@ class RenderProgress:
                 ncols=columns or DEFAULT_SIZE[0],
                 nrows=lines or DEFAULT_SIZE[1],  # tqdm hides every bar on a terminal that reports 0 lines
                 dynamic_ncols=bool(columns and lines),
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}]",
+                bar_format=(
+                    "{desc}: {percentage:3.0f}%|{bar}| "
+                    + ("{n:.0f}/{total:.0f} files" if unit == "files" else "{n:.1f}/{total:.1f} s")
+                    + " [{elapsed}<{remaining}]"
+                ),
             )
 
     def __call__(self, done: int, total: int) -> None:
-        """The renderer's callback: ``done`` frames of ``total`` are written."""
+        """The renderer's callback: ``done`` frames of ``total`` are written.
+
+        A ``total`` other than the bar's (the output of a render counted at another rate than
+        its input) is scaled onto it.
+        """
         bar = self._bar
-        if bar is not None and done > bar.n:
+        if bar is None:
+            return
+        if total != self.frames and total > 0:
+            done = int(done * self.frames / total)
+        if done > bar.n:
             bar.update(done - bar.n)
 
     def close(self, *, ok: bool = True) -> None:

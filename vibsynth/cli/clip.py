@@ -1,4 +1,4 @@
-"""``vibsynth clip list|show|validate|import|export``: haptic clips on the command line (docs/clips.md).
+"""``vibsynth clip list|show|validate|import|export|from-audio``: haptic clips on the command line (docs/clips.md).
 
 A broken clip file is reported the same way everywhere: one warning naming file:line when the
 library is read and, when that clip is asked for by name, an error with the same text.
@@ -14,6 +14,7 @@ from typing import Any
 
 from vibsynth.cli._clip_play import add_clip_play_parsers
 from vibsynth.cli._common import file_name_argument, validate_files
+from vibsynth.cli._follow import add_from_audio_parser
 from vibsynth.cli._table import Column, add_format_argument, emit, output_format
 from vibsynth.errors import ClipError, ParameterError
 from vibsynth.formats.haptic_design import HapticDesign
@@ -22,7 +23,7 @@ from vibsynth.settings.clips import Clip, ClipLibrary, UnknownClipError, clip_to
 from vibsynth.settings.config import add_config_arguments, settings_from_args
 from vibsynth.settings.models_config import VibsynthConfig
 
-__all__ = ["ORDER", "register", "IMPORTERS"]
+__all__ = ["ORDER", "register", "IMPORTERS", "EXPORTERS", "clip_by_name_or_path"]
 
 ORDER = 42
 
@@ -141,7 +142,8 @@ def cmd_import(args: argparse.Namespace) -> int:
     design = IMPORTERS[_kind(path, args.source)](path)
     if design.ignored:
         print(f"vibsynth: warning: {path}: ignored: {'; '.join(design.ignored)}", file=sys.stderr)
-    name = args.name or clip_name(path.stem)
+    to_file = args.output is not None and not args.output.is_dir()
+    name = args.name or clip_name((args.output if to_file else path).stem)  # a clip's name is its file's stem
     clip = clip_from_design(design, name, ClipMapping.from_settings(settings))
     if args.output is not None:
         from vibsynth.settings.clips import save_clip
@@ -156,9 +158,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
-def _clip_for_export(library: ClipLibrary, ref: str) -> Clip:
-    """A clip by name, or a clip file (``something.yaml``) given by path."""
-    if ref.endswith(".yaml") and ("/" in ref or Path(ref).is_file()):
+def clip_by_name_or_path(library: ClipLibrary, ref: str) -> Clip:
+    """A clip by name, or a clip file given by path (``something.yaml``, or anything with a folder in it)."""
+    if "/" in ref or (ref.endswith(".yaml") and Path(ref).is_file()):
         return load_clip(ref)
     return _get(library, ref)
 
@@ -183,7 +185,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from vibsynth.formats.files import atomic_write
 
     settings, library = _library(args)
-    clip = _clip_for_export(library, args.name)
+    clip = clip_by_name_or_path(library, args.name)
     design = design_from_clip(clip, ClipMapping.from_settings(settings))
     to_text, label = EXPORTERS[args.format]
     text = to_text(design, clip)
@@ -279,4 +281,5 @@ def register(subparsers: Any) -> None:
     p = sub.add_parser("schema", help="print the JSON Schema of a clip file (editor completion)")
     p.set_defaults(func=cmd_schema)
 
+    add_from_audio_parser(sub, add_config_arguments)  # from-audio: the Follow tracker offline (cli/_follow.py)
     add_clip_play_parsers(sub)  # play, stop: a running server plays it (cli/_clip_play.py)

@@ -20,6 +20,7 @@ from vibsynth.cli._common import (
     sample_rate,
     unit_interval,
 )
+from vibsynth.cli._follow import add_follow_options, run_follow_render
 from vibsynth.cli._inputs import wav_channel
 from vibsynth.cli._progress import RenderProgress, add_quiet_argument
 from vibsynth.cli.analyze import analyze_file
@@ -50,8 +51,11 @@ Render noise with the paper's spectrum model (a texture loops seamlessly) to a W
   --from FILE --variant V     a recording's experiment-3 variant at the recording's own level:
                               S1 = M + t1 V1, S1:8 = all 8 components, S2:8 = all but the first, M = mean
   --midi FILE.mid             a MIDI performance through the live MIDI mapping and the real-time engine
-  --clip NAME                 a haptic clip (vibsynth clip list) through the real-time engine, as
-                              /vibsynth/play plays it (--gain, --clip-rate, --loops; docs/clips.md)
+  --clip NAME|FILE.yaml       a haptic clip (vibsynth clip list, or a clip file) through the real-time
+                              engine, as /vibsynth/play plays it (--gain, --clip-rate, --loops; docs/clips.md)
+  --follow IN.wav|FOLDER      the haptic track Follow makes of a sound or vibration recording, aligned
+                              to it, streamed (--follow-mode, --follow-focus; docs/follow.md); a folder
+                              renders every WAV under it into -o FOLDER, --jobs at a time or on --dask
 The band powers of the result match the target within rounding (closed-form synthesis).
 The output is written as it renders: memory stays flat whatever --seconds. A texture longer
 than 8 s (at 48 kHz; 384,000 samples) repeats one seamless period of 4-8 s.
@@ -72,7 +76,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     source.add_argument("--balance", type=finite_float, metavar="B", help="high/low balance (knob units)")
     source.add_argument("--from", dest="from_file", metavar="FILE", help="recording to re-synthesize")
     source.add_argument("--midi", metavar="FILE.mid", help="MIDI file to render through the MIDI mapping")
-    source.add_argument("--clip", metavar="NAME", help="haptic clip to render (see vibsynth clip list)")
+    source.add_argument(
+        "--clip", metavar="NAME|FILE.yaml", help="haptic clip to render (see vibsynth clip list), or a clip file"
+    )
+    source.add_argument(
+        "--follow", metavar="IN.wav|FOLDER", help="render the haptic track of a sound (Follow, offline)"
+    )
     p.add_argument("--intensity", type=unit_interval, metavar="I", help="intensity knob 0..1 (with --balance)")
     p.add_argument(
         "--channel",
@@ -99,6 +108,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--range-db", type=finite_float, default=DEFAULT_RANGE_DB, help="intensity knob range (dB)")
     p.add_argument("--config", metavar="FILE", help="config file (with --midi or --clip)")
     add_clip_play_arguments(p)
+    add_follow_options(p, prefix="follow-", force=False)
     add_quiet_argument(p)
     add_basis_argument(p)
     p.set_defaults(func=run)
@@ -126,16 +136,13 @@ def _render_midi(args: argparse.Namespace) -> RenderResult:
 def _render_clip(args: argparse.Namespace) -> RenderResult:
     """A haptic clip through the engine, compiled as the live player compiles it."""
     from vibsynth.app.clip_render import prepare_clip_render
-    from vibsynth.settings.clips import UnknownClipError, load_clip_library
+    from vibsynth.cli.clip import clip_by_name_or_path
+    from vibsynth.settings.clips import load_clip_library
     from vibsynth.settings.config import load_config
 
     overrides = {"audio": {"rate": int(args.rate)}} if args.rate else None
     settings = load_config(args.config, overrides=overrides).settings
-    library = load_clip_library(settings)
-    try:
-        clip = library.get(args.clip)
-    except UnknownClipError as exc:  # a name typed on the command line: a usage error
-        raise ParameterError(str(exc)) from None
+    clip = clip_by_name_or_path(load_clip_library(settings), args.clip)
     job = prepare_clip_render(
         clip,
         settings=settings,
@@ -226,6 +233,13 @@ def run(args: argparse.Namespace) -> int:
     """Exit 0; 1 (one line) when a file cannot be read or written; bad arguments raise (exit 2)."""
     if not args.clip and (args.gain, args.clip_rate, args.loops) != (1.0, 1.0, 1):
         raise ParameterError("--gain, --clip-rate and --loops go with --clip NAME")
+    if args.follow:
+        from vibsynth.settings.config import load_config
+
+        overrides = {"audio": {"rate": int(args.rate)}} if args.rate else None
+        return run_follow_render(args, load_config(args.config, overrides=overrides).settings)
+    if (args.follow_mode, args.follow_focus, args.jobs, args.dask) != ("vibration", "all", None, None):
+        raise ParameterError("--follow-mode, --follow-focus, --jobs and --dask go with --follow IN.wav|FOLDER")
     try:
         check_target(args.output, writable=True)
         result = _render_midi(args) if args.midi else _render_clip(args) if args.clip else _render_loop(args)
