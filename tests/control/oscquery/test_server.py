@@ -196,3 +196,17 @@ class _Null:
 
     def send(self, data: bytes) -> bool:
         return True
+
+
+def test_a_taken_default_port_falls_back_and_a_chosen_one_is_an_error(server, tree, handler, ctl):
+    from vibsynth.control.oscquery.server import OscQueryServer
+    from vibsynth.errors import ConfigError
+
+    second = OscQueryServer(tree, handler, ctl, port=server.port, port_fallback=True)
+    second.start()
+    try:
+        assert second.port != server.port and get(second, "/vibsynth/intensity?TYPE") == (200, {"TYPE": "f"})
+    finally:
+        second.stop()
+    with pytest.raises(ConfigError, match="cannot listen"):
+        OscQueryServer(tree, handler, ctl, port=server.port).start()

@@ -33,7 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=flag_type("discovery.oscquery_port"),
         default=None,
         metavar="PORT",
-        help="TCP port of the OSCQuery server, HTTP + WebSocket (default: discovery.oscquery_port, 9572; 0 = any)",
+        help="TCP port of the OSCQuery server, HTTP + WebSocket (default: discovery.oscquery_port, 9572, or a free "
+        "port when that one is taken; with this flag a taken port is an error; 0 = any free port)",
     )
     group.add_argument(
         "--no-discovery", action="store_true", default=False, help="no OSCQuery server and no mDNS advertising"
@@ -136,6 +137,7 @@ def create(
         allow=osc_server.udp.allow,
         name=name,
         local_names=(f"{host_label}.local",),
+        port_fallback=port_flag is None,
     )
     advertiser = None
     addresses = list(discovery.interfaces) if discovery.interfaces else [osc_host]

@@ -26,6 +26,7 @@ listens, clients and rates are bounded. Every refusal is one clear answer, count
 from __future__ import annotations
 
 import asyncio
+import errno
 import ipaddress
 import json
 import logging
@@ -176,6 +177,8 @@ class OscQueryServer:
     local_names : iterable of str
         Host names besides IP addresses and localhost the Host header may carry (the
         advertised ``NAME.local``).
+    port_fallback : bool
+        When the port is taken, listen on a free one (with a warning) instead of failing.
     """
 
     name = "oscquery"
@@ -193,6 +196,7 @@ class OscQueryServer:
         allow: Any = None,
         name: str = "vibsynth",
         local_names: tuple[str, ...] = (),
+        port_fallback: bool = False,
     ) -> None:
         self.tree = tree
         self.handler = handler
@@ -200,6 +204,7 @@ class OscQueryServer:
         self.host = host
         self.requested_port = int(port)
         self.port = int(port)
+        self.port_fallback = port_fallback
         self.osc_host = osc_host
         self.osc_port = int(osc_port)
         self.allow = allow
@@ -319,8 +324,15 @@ class OscQueryServer:
         app.router.add_route("*", "/{tail:.*}", self._request)
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
         await self._runner.setup()
-        site = web.TCPSite(self._runner, self.host, self.requested_port)
-        await site.start()
+        try:
+            site = web.TCPSite(self._runner, self.host, self.requested_port)
+            await site.start()
+        except OSError as exc:
+            if not (self.port_fallback and exc.errno == errno.EADDRINUSE):
+                raise
+            log.warning("OSCQuery: port %d is in use; listening on a free port instead", self.requested_port)
+            site = web.TCPSite(self._runner, self.host, 0)
+            await site.start()
         server = site._server  # noqa: SLF001 - aiohttp exposes the bound port only here
         sockets = getattr(server, "sockets", None) or []
         self.port = int(sockets[0].getsockname()[1]) if sockets else self.requested_port
