@@ -422,6 +422,8 @@ class FileInput:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.ended = threading.Event()
+        #: The output frame at which the file's first frame was due (None until it starts).
+        self.start_frame: int | None = None
         self.loops = 0
         self.error: str = ""
         self._state = CLOSED
@@ -443,6 +445,7 @@ class FileInput:
             return
         self._stop.clear()
         self.ended.clear()
+        self.start_frame = None
         self._state = OPEN
         self._thread = threading.Thread(target=self._run, name="vibsynth-file-input", daemon=True)
         self._thread.start()
@@ -476,7 +479,7 @@ class FileInput:
             yield tail.astype(np.float32)
 
     def _run(self) -> None:
-        start = int(self.frame_clock())
+        start = self.start_frame = int(self.frame_clock())
         fed = 0
         pending = np.zeros((0, len(self.channels)), dtype=np.float32)
         blocks = self._blocks()
