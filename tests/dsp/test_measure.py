@@ -1,0 +1,153 @@
+"""Swept-sine measurement: a known impulse response and latency are recovered (seeded noise)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from vibsynth.dsp.measure import (
+    SweepPlan,
+    band_response_db,
+    clipped_samples,
+    deconvolve,
+    exp_sweep,
+    inverse_filter,
+    ir_peak,
+    measure_recording,
+    response_freqs,
+)
+from vibsynth.errors import ParameterError
+
+FS = 48000.0
+
+
+def resonance(f0: float = 65.0, q: float = 3.0, gain_db: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """A voice coil's acceleration: a 2nd-order high-pass resonance (RBJ biquad)."""
+    w0 = 2 * math.pi * f0 / FS
+    alpha = math.sin(w0) / (2 * q)
+    c = math.cos(w0)
+    b = np.array([(1 + c) / 2, -(1 + c), (1 + c) / 2]) * 10 ** (gain_db / 20)
+    a = np.array([1 + alpha, -2 * c, 1 - alpha])
+    return b / a[0], a / a[0]
+
+
+def record(plan: SweepPlan, b, a, *, delay: int, noise: float, seed: int, extra: float = 0.3) -> np.ndarray:
+    x = plan.stimulus()
+    n = x.size + int(extra * FS)
+    y = np.zeros(n)
+    out = signal.lfilter(b, a, x)
+    y[delay : delay + out.size] = out[: n - delay]
+    return y + noise * np.random.default_rng(seed).standard_normal(n)
+
+
+def truth_db(b, a, freqs):
+    _, h = signal.freqz(b, a, worN=freqs, fs=FS)
+    return 20 * np.log10(np.abs(h))
+
+
+def test_sweep_is_exponential_and_its_inverse_filter_makes_an_impulse():
+    x = exp_sweep(FS, 10.0, 1000.0, 2.0)
+    assert x.size == 96000 and np.max(np.abs(x)) <= 1.0
+    # instantaneous frequency doubles in equal times: zero crossings per 10 ms grow
+    early = np.count_nonzero(np.diff(np.signbit(x[4800:9600])))
+    late = np.count_nonzero(np.diff(np.signbit(x[86400:91200])))
+    assert late > 20 * early
+    inv = inverse_filter(x, FS, 10.0, 1000.0)
+    d = signal.fftconvolve(x, inv)
+    k = int(np.argmax(np.abs(d)))
+    assert k == x.size - 1
+    assert abs(d[k]) > 20 * np.percentile(np.abs(d), 99)
+
+
+@pytest.mark.parametrize("delay", [0, 1, 517, 4801])
+def test_known_impulse_response_and_latency_recovered(delay):
+    rng = np.random.default_rng(delay)
+    sweep = exp_sweep(FS, 5.0, 2000.0, 1.0)
+    # latency: a pure delay and gain, with noise, comes back to the sample
+    y = 0.3 * np.concatenate([np.zeros(delay), sweep, np.zeros(12000 - delay)])
+    y += 1e-3 * rng.standard_normal(y.size)
+    assert round(ir_peak(deconvolve(y, sweep, FS, 5.0, 2000.0), search=slice(0, 6000))) == delay
+    # the IR: a random decaying FIR comes back through the 5-2000 Hz band limit
+    taps = np.zeros(200)
+    taps[0] = 0.5
+    taps[1:] = 0.05 * rng.standard_normal(199) * np.exp(-np.arange(1, 200) / 30)
+    y = np.zeros(sweep.size + 12000)
+    out = np.convolve(sweep, taps)
+    y[delay : delay + out.size] = out
+    ir = deconvolve(y, sweep, FS, 5.0, 2000.0)
+    freqs = np.array([20.0, 100.0, 500.0, 1000.0])
+    got = np.fft.rfft(np.roll(ir, 24000 - delay)[:48000], 1 << 16)  # the limit's ringing on both sides
+    want = np.fft.rfft(np.concatenate([np.zeros(24000), taps]), 1 << 16)
+    bins = np.round(freqs * (1 << 16) / FS).astype(int)
+    assert np.allclose(20 * np.log10(np.abs(got[bins] / want[bins])), 0.0, atol=0.05)
+    assert np.allclose(np.angle(got[bins] / want[bins]), 0.0, atol=0.01)
+
+
+def test_fractional_latency_is_refined():
+    sweep = exp_sweep(FS, 5.0, 2000.0, 1.0)
+    # a delay of 300.5 samples by a half-sample (Lagrange-free) FIR: the mean of two delays
+    y = np.zeros(sweep.size + 2000)
+    y[300 : 300 + sweep.size] += 0.5 * sweep
+    y[301 : 301 + sweep.size] += 0.5 * sweep
+    ir = deconvolve(y, sweep, FS, 5.0, 2000.0)
+    assert ir_peak(ir, search=slice(0, 1000)) == pytest.approx(300.5, abs=0.05)
+
+
+def test_resonant_actuator_measured_within_a_tenth_of_a_db_with_noise():
+    plan = SweepPlan(fs=FS, seconds=3.0, n_sweeps=3)
+    b, a = resonance(65.0, 3.0, gain_db=-6.0)
+    m = measure_recording(record(plan, b, a, delay=517, noise=3e-4, seed=1), plan)
+    sel = (m.freqs >= 20) & (m.freqs <= 800)
+    err = m.response_db - truth_db(b, a, m.freqs)
+    assert np.max(np.abs(err[sel])) < 0.1
+    assert np.max(np.abs(err)) < 0.3  # 10-1000 Hz
+    assert round(m.latency) == 517
+    assert m.repeatability_db < 0.1
+    assert m.snr_in(20, 800) > 40
+    assert m.noise_rms_db == pytest.approx(20 * math.log10(3e-4), abs=0.3)
+    assert m.clipped == 0
+    # the 30 bands follow the fine response: the resonance's band is the loudest
+    assert m.band_db.shape == (30,)
+    assert 50 < [f for f, _ in sorted(zip(np.geomspace(10, 1000, 30), m.band_db), key=lambda p: -p[1])][0] < 90
+
+
+def test_snr_follows_the_noise_and_repeatability_sees_a_burst():
+    plan = SweepPlan(fs=FS, seconds=2.0, n_sweeps=3)
+    b, a = resonance()
+    quiet = measure_recording(record(plan, b, a, delay=10, noise=1e-5, seed=2), plan)
+    loud = measure_recording(record(plan, b, a, delay=10, noise=1e-3, seed=2), plan)
+    assert np.median(quiet.snr_db - loud.snr_db) == pytest.approx(40.0, abs=1.5)
+    y = record(plan, b, a, delay=10, noise=1e-5, seed=3)
+    start = plan.starts()[1] + plan.sweep_samples // 2
+    y[start : start + 9600] += 0.3 * np.random.default_rng(4).standard_normal(9600)  # a knock mid-sweep
+    knocked = measure_recording(y, plan)
+    assert knocked.repeatability_db > 0.5 > 0.1 > quiet.repeatability_db
+
+
+def test_clipping_counted():
+    x = np.array([0.0, 0.5, 0.995, -1.0, 0.2])
+    assert clipped_samples(x) == 2
+
+
+def test_band_response_of_a_flat_response_is_flat():
+    f = response_freqs()
+    assert np.allclose(band_response_db(f, np.full(f.size, -12.0)), -12.0)
+
+
+def test_plan_and_recording_checked():
+    with pytest.raises(ParameterError):
+        SweepPlan(fs=FS, n_sweeps=0)
+    with pytest.raises(ParameterError):
+        SweepPlan(fs=FS, level=1.5)
+    with pytest.raises(ParameterError):
+        SweepPlan(fs=2000.0, f2=2000.0)
+    plan = SweepPlan(fs=FS, seconds=1.0, n_sweeps=1)
+    with pytest.raises(ParameterError, match="at least"):
+        measure_recording(np.zeros(100), plan)
+    bad = np.zeros(plan.stimulus().size + 48000)
+    bad[5] = np.nan
+    with pytest.raises(ParameterError, match="NaN"):
+        measure_recording(bad, plan)
