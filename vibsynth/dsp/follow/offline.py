@@ -384,7 +384,7 @@ def window_analysis(
     hop = tracker.hop
     an = tracker.analyzer
     assert isinstance(an, VibrationAnalyzer)
-    window = an.level_window * tracker.factor // tracker.up
+    window = tracker.level_window
     n_frames = (arr.size - window) // hop + 1 if arr.size >= window else 0
     if n_frames <= 0:
         return window, hop, np.zeros((0, basis.n_bands)), np.zeros(0)

@@ -33,7 +33,7 @@ from vibsynth.dsp.follow.audio import AUDIO_RATE_HZ, MIN_AUDIO_RATE_HZ, AudioAna
 from vibsynth.dsp.follow.frames import TrackFrames
 from vibsynth.dsp.follow.params import TrackerParams
 from vibsynth.dsp.follow.stream import Resampler, rate_factors
-from vibsynth.dsp.follow.vibration import VIBRATION_RATE_HZ, VibrationAnalyzer
+from vibsynth.dsp.follow.vibration import VIBRATION_RATE_HZ, LevelMeter, VibrationAnalyzer
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB, level_db_to_knob
 from vibsynth.errors import ParameterError
 
@@ -154,9 +154,23 @@ class Tracker:
             self.analyzer = AudioAnalyzer(
                 fs=self.rate, hop=self.hop_internal, params=p, balance_limits=self.balance_limits
             )
-        #: seconds of filter delay in front of the level's window (resampler + band filter)
-        self.filter_delay_s = self.decimator.delay_s(140.0) + self.analyzer.filter_delay_s
-        self.latency = int(round((self.filter_delay_s + 0.5 * self.analyzer.level_window / self.rate) * self.fs))
+        # Vibration mode measures the 80-200 Hz level at the input rate when it decimates: the
+        # Butterworth's upper skirt then counts content up to the input's Nyquist, as the analog
+        # definition (dsp/intensity.py) does; at the internal rate a bright accelerometer signal's
+        # 2-5 kHz content would be lost from its level (2 dB on HaTT scans).
+        self._meter: LevelMeter | None = None
+        if p.mode == "vibration" and self.factor > 1:
+            self._meter = LevelMeter(self.fs, p.level_ms)
+            self.filter_delay_s = self._meter.delay_s
+            window_s = self._meter.window / self.fs
+        else:
+            #: seconds of filter delay in front of the level's window (resampler + band filter)
+            self.filter_delay_s = self.decimator.delay_s(140.0) + self.analyzer.filter_delay_s
+            window_s = self.analyzer.level_window / self.rate
+        #: input samples of the level's window
+        self.level_window = int(round(window_s * self.fs))
+        self.latency = int(round((self.filter_delay_s + 0.5 * window_s) * self.fs))
+        self._input = 0
         self._internal = 0  # internal samples consumed
         self._gate = False
         self._offset: float | None = None
@@ -166,6 +180,9 @@ class Tracker:
         self.decimator.reset()
         self.analyzer.reset()
         self._internal = 0
+        self._input = 0
+        if self._meter is not None:
+            self._meter.reset()
         self._gate = False
         self._offset = None
         self.frames_done = 0
@@ -211,13 +228,18 @@ class Tracker:
         self.clipped_samples += count_clipped(x)
         if self._offset is None and x.size:
             self._offset = float(x.mean())
-        y = self.decimator(x - (self._offset or 0.0))
+        x = x - (self._offset or 0.0)
+        y = self.decimator(x)
         start = self._internal
         self._internal += y.size
         first = (start // self.hop_internal + 1) * self.hop_internal
         ends_abs = np.arange(first, self._internal + 1, self.hop_internal, dtype=np.int64)
         ends = (ends_abs - start).astype(np.intp)
         level, balance, strength, drive = self._analyse(y, ends)
+        if self._meter is not None:  # the 80-200 Hz level at the input rate (see _build)
+            in_ends = ((ends_abs - 1) * self.factor + 1 - self._input).astype(np.intp)
+            level = drive = self._meter(x, in_ends)
+        self._input += x.size
         intensity, gate = self._map(level, drive)
         onset = np.where(gate, strength * np.maximum(intensity, 0.25), 0.0)
         if not self.params.transients:

@@ -8,11 +8,17 @@ Intensity
 Balance
     t1 of the 30-band log spectrum on the basis' V1 (the paper's balance): each band of
     :mod:`vibsynth.dsp.filterbank` as a causal Butterworth band-pass, its power averaged over the
-    last ``balance_ms`` (the paper's 100 ms). A band narrower than about 40 Hz holds fewer than
-    4 degrees of freedom in 100 ms (the 10 Hz band: 0.35), which makes its dB both noisy and
+    last ``balance_ms`` (the paper's 100 ms). A band narrower than about 20 Hz holds fewer than
+    2 degrees of freedom in 100 ms (the 10 Hz band: 0.35), which makes its dB both noisy and
     biased (the codec's "+4 t1" bias); such bands average over the shortest window that gives
-    them 4, and every band's dB is corrected by the known mean of the log of a chi-square with
-    that many degrees of freedom, so stationary noise measures an unbiased t1.
+    them :data:`MIN_DOF` (the 10 Hz band: 0.5 s), and every band's dB is corrected by the known
+    mean of the log of a chi-square with that many degrees of freedom, so stationary noise
+    measures an unbiased t1. (4 degrees of freedom, 0.75 s for the 10 Hz band, lagged 0.44
+    balance behind a seam between two HaTT textures in a 0.5 s window; 2 keep it under 0.3 and
+    stationary noise within 0.1.)
+    Each band's power is divided by the broadband power over the same window, delayed by the
+    band's filter delay, so a level step does not read as a change of balance while the narrow
+    bands catch up (a 15 dB step swung the balance by 0.5 for 200 ms without it).
 Onsets
     Rises of the broadband (20 Hz high-passed) power (:mod:`vibsynth.dsp.follow.onsets`).
 
@@ -35,14 +41,14 @@ from vibsynth.dsp.follow.onsets import OnsetDetector
 from vibsynth.dsp.follow.stream import BoxcarAtEnds, HopSums, Ring, SosStream, group_delay_s
 from vibsynth.dsp.intensity import BUTTERWORTH_ORDER, INTENSITY_BAND_HZ
 
-__all__ = ["VIBRATION_RATE_HZ", "VibrationAnalyzer", "MIN_DOF", "band_sos", "intensity_sos"]
+__all__ = ["VIBRATION_RATE_HZ", "LevelMeter", "VibrationAnalyzer", "MIN_DOF", "band_sos", "intensity_sos"]
 
 #: Internal rate of vibration mode: the input is decimated (or interpolated) by a whole factor to
 #: at least this. The causal filters' bilinear warping at 1 kHz stays under 0.25 dB here; at 4 kHz
 #: the 80-200 Hz filter's upper skirt lost up to 1.3 dB of a bright spectrum's band level.
 VIBRATION_RATE_HZ = 8000.0
 #: Degrees of freedom each band's power estimate has at least (sets the low bands' windows).
-MIN_DOF = 4.0
+MIN_DOF = 2.0
 _CHUNK_S = 0.025
 _MAX_BAND_WINDOW_S = 3.0
 _LN10 = math.log(10.0)
@@ -79,6 +85,35 @@ def _log_chi2_bias_db(dof: float) -> float:
     return float(10.0 / _LN10 * (special.digamma(dof / 2.0) - math.log(dof / 2.0)))
 
 
+class LevelMeter:
+    """The paper's 80-200 Hz band level over a boxcar window, causal, at one rate.
+
+    Parameters
+    ----------
+    fs : float
+    level_ms : float
+        Window length.
+    """
+
+    def __init__(self, fs: float, level_ms: float) -> None:
+        self.filter = SosStream(intensity_sos(fs))
+        self.window = max(1, int(round(level_ms * 1e-3 * fs)))
+        self._box = BoxcarAtEnds(self.window)
+        #: group delay of the filter at the band's centre (s)
+        self.delay_s = group_delay_s(self.filter.sos, math.sqrt(INTENSITY_BAND_HZ[0] * INTENSITY_BAND_HZ[1]), fs)
+
+    def reset(self) -> None:
+        self.filter.reset()
+        self._box.reset()
+
+    def __call__(self, x: NDArray[np.float64], ends: NDArray[np.intp]) -> NDArray[np.float64]:
+        """Band level (dB, ``-inf`` for silence) of the windows ending at ``ends`` in this block."""
+        band = self.filter(x)
+        power = self._box((band * band)[np.newaxis, :], ends)[0]
+        with np.errstate(divide="ignore"):
+            return np.asarray(10.0 * np.log10(power), dtype=np.float64)
+
+
 class VibrationAnalyzer:
     """Per-frame band level, balance and onset function of a vibration at the internal rate.
 
@@ -112,9 +147,8 @@ class VibrationAnalyzer:
         self.hop = int(hop)
         self.basis = basis
         self.balance_limits = balance_limits
-        self.level_filter = SosStream(intensity_sos(fs))
-        self.level_window = max(1, int(round(level_ms * 1e-3 * fs)))
-        self._level = BoxcarAtEnds(self.level_window)
+        self.meter = LevelMeter(fs, level_ms)
+        self.level_window = self.meter.window
         self.chunk_hops = max(1, int(round(_CHUNK_S * fs / self.hop)))
         if uniform_windows:
             self.chunk_hops = 1
@@ -132,7 +166,20 @@ class VibrationAnalyzer:
                     n = min(limit, int(math.ceil(n * 1.25)))
                 self.band_chunks[k] = n
                 self.bias_db[k] = _log_chi2_bias_db(_dof(s, n * self.chunk, fs))
+        # Level-change robustness: each band's power is divided by the broadband power averaged over
+        # the same chunks, delayed by the band's own filter delay (whole chunks). A level step then
+        # reaches numerator and denominator together, and the balance does not swing while the narrow
+        # bands (up to 0.2 s of delay, 0.75 s of window) catch up with the wide ones.
+        self.normalise = not uniform_windows
+        self.band_lag = np.zeros(len(sos), dtype=np.intp)
+        self._reference = SosStream(
+            np.asarray(signal.butter(2, 8.0, btype="high", output="sos", fs=fs), dtype=np.float64)
+        )
         self._chunks = Ring(int(self.band_chunks.max()), len(sos))
+        self.band_delay_s = np.array([group_delay_s(sk, float(c), fs) for sk, c in zip(sos, basis.centres_hz)])
+        if self.normalise:
+            self.band_lag = np.round(self.band_delay_s * fs / self.chunk).astype(np.intp)
+        self._broadband = Ring(int((self.band_chunks + self.band_lag).max()), 1)
         self._pending = np.zeros(0)
         self._balance = 0.0
         self._power = np.zeros(len(sos))
@@ -140,18 +187,16 @@ class VibrationAnalyzer:
         self._hp = SosStream(np.asarray(signal.butter(2, 20.0, btype="high", output="sos", fs=fs), dtype=np.float64))
         self._hop_power = HopSums()
         self.onsets = OnsetDetector(self.hop / self.fs, [1.0])
-        centre = math.sqrt(INTENSITY_BAND_HZ[0] * INTENSITY_BAND_HZ[1])
         #: group delay of the 80-200 Hz filter at its centre (s)
-        self.filter_delay_s = group_delay_s(self.level_filter.sos, centre, fs)
-        #: group delay of each band's filter at its centre (s): the 10 Hz band lags by ~0.2 s
-        self.band_delay_s = np.array([group_delay_s(sk, float(c), fs) for sk, c in zip(sos, basis.centres_hz)])
+        self.filter_delay_s = self.meter.delay_s
 
     def reset(self) -> None:
-        self.level_filter.reset()
-        self._level.reset()
+        self.meter.reset()
         for b in self.bands:
             b.reset()
         self._chunks.reset()
+        self._broadband.reset()
+        self._reference.reset()
         self._pending = np.zeros(0)
         self._balance = 0.0
         self._power = np.zeros(len(self.bands))
@@ -171,8 +216,18 @@ class VibrationAnalyzer:
         rows = self._chunks.last(self._chunks.size)
         m = rows.shape[0]
         power = np.array([rows[max(0, m - n) :, k].mean() for k, n in enumerate(self.band_chunks)]) / self.chunk
-        if np.all(power > 0):
-            self._band_db = 10.0 * np.log10(power) - self.bias_db
+        shape = power
+        if self.normalise:
+            self._broadband.push(np.array([float(np.sum(self._reference(chunk) ** 2))]))
+            ref = self._broadband.last(self._broadband.size)[:, 0]
+            r = ref.size
+            mean = [
+                ref[max(0, r - lag - n) : max(1, r - lag)].mean() for n, lag in zip(self.band_chunks, self.band_lag)
+            ]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                shape = power / np.array(mean)
+        if np.all(shape > 0) and np.all(np.isfinite(shape)):
+            self._band_db = 10.0 * np.log10(shape) - self.bias_db
             t1 = float(self.basis.scores(self._band_db)[0])
             lo, hi = self.balance_limits
             self._balance = float(np.clip(self.basis.balance_from_t1(t1), lo, hi))
@@ -196,10 +251,7 @@ class VibrationAnalyzer:
         band_power : ndarray, shape (k, n_bands)
             The 30-band powers behind each frame's balance (window means, not bias corrected).
         """
-        band = self.level_filter(y)
-        power = self._level((band * band)[np.newaxis, :], ends)[0]
-        with np.errstate(divide="ignore"):
-            level = 10.0 * np.log10(power)
+        level = self.meter(y, ends)
         # The bank on whole chunks; a frame takes the balance of the last chunk ended at or before it.
         balance = np.empty(ends.size)
         bands = np.empty((ends.size, len(self.bands)))
