@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from tests.control.osc.fakes import PRESETS, make_controller
-from vibsynth.control.osc.handler import OscHandler
-from vibsynth.control.osc.tables import register_tables
+from tests.control.osc.conftest import ctl, handler  # noqa: F401 - the OSC tests' 4-channel controller and handler
+from tests.control.osc.fakes import PRESETS
 from vibsynth.control.oscquery.methods import method_nodes, reads
 from vibsynth.control.oscquery.server import OscQueryServer
 from vibsynth.control.oscquery.tree import Tree
@@ -20,16 +19,6 @@ class Names:
 
     def names(self) -> list[str]:
         return list(self.list)
-
-
-@pytest.fixture
-def ctl():
-    return make_controller(channels=4)
-
-
-@pytest.fixture
-def handler(ctl):
-    return register_tables(OscHandler(ctl, sync_worker=None))
 
 
 @pytest.fixture

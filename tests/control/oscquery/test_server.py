@@ -210,3 +210,42 @@ def test_a_taken_default_port_falls_back_and_a_chosen_one_is_an_error(server, tr
         second.stop()
     with pytest.raises(ConfigError, match="cannot listen"):
         OscQueryServer(tree, handler, ctl, port=server.port).start()
+
+
+def test_a_preset_file_added_on_disk_reaches_listeners_as_a_path_change(tmp_path, handler, ctl):
+    from vibsynth.control.oscquery.methods import method_nodes, reads
+    from vibsynth.control.oscquery.server import OscQueryServer
+    from vibsynth.control.oscquery.tree import Tree
+    from vibsynth.settings.library import PresetLibrary, shipped_presets_dir
+
+    library = PresetLibrary(shipped_presets_dir(), tmp_path)
+    tree = Tree(method_nodes(handler, library.names, lambda: []), reads(ctl))
+    srv = OscQueryServer(tree, handler, ctl, port=0)
+    srv.start()
+
+    async def run():
+        session = aiohttp.ClientSession()
+        ws = await session.ws_connect(f"http://127.0.0.1:{srv.port}/")
+        try:
+            await asyncio.sleep(0.2)
+            (tmp_path / "velvet-test.yaml").write_text(
+                "version: 1\nname: velvet-test\nintensity: 0.5\nbalance: -1.0\n", encoding="utf-8"
+            )
+            library.reload()  # what the preset watcher of serve does
+            changed = set()
+            while "/vibsynth/ch/4/preset" not in changed:
+                msg = json.loads((await ws.receive(timeout=5)).data)
+                assert msg["COMMAND"] == "PATH_CHANGED"
+                changed.add(msg["DATA"])
+            return changed
+        finally:
+            await ws.close()
+            await session.close()
+
+    try:
+        changed = asyncio.run(run())
+        status, node = get(srv, "/vibsynth/preset?RANGE")
+    finally:
+        srv.stop()
+    assert changed == {"/vibsynth/preset"} | {f"/vibsynth/ch/{c}/preset" for c in range(1, 5)}
+    assert status == 200 and "velvet-test" in node["RANGE"][0]["VALS"]
