@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.control.osc.conftest import ctl, handler  # noqa: F401 - the OSC tests' 4-channel controller and handler
+from tests.control.osc import conftest as osc_fixtures
 from tests.control.osc.fakes import PRESETS
 from vibsynth.control.oscquery.methods import method_nodes, reads
 from vibsynth.control.oscquery.server import OscQueryServer
@@ -19,6 +19,11 @@ class Names:
 
     def names(self) -> list[str]:
         return list(self.list)
+
+
+#: The OSC tests' 4-channel controller (fake engine) and its handler with every table registered.
+ctl = osc_fixtures.ctl
+handler = osc_fixtures.handler
 
 
 @pytest.fixture
