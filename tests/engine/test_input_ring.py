@@ -6,7 +6,9 @@ out through ``read``; what comes out is compared with what went in, sample for s
 
 from __future__ import annotations
 
+import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -212,3 +214,31 @@ def test_frame_offset_puts_both_streams_on_one_clock():
     later_out = BlockStamp(frame=600, adc_time=0.0, current_time=1.1, dac_time=1.105, monotonic=10.100)
     later_in = BlockStamp(frame=2050, adc_time=7.067, current_time=7.070, dac_time=0.0, monotonic=10.070)
     assert frame_offset(later_out, later_in, fs) == pytest.approx(1988 - 500)
+
+
+def test_the_input_callback_never_needs_the_gil():
+    """The callback runs on a thread while this one keeps the GIL (the switch interval raised, so
+    it is never handed over): a callback that asked for the GIL would wait past the deadline."""
+    ring = InputRing(2, 48000.0)
+    block = np.ones((128, 2), np.float32)
+    ready = threading.Event()
+
+    def call() -> None:
+        ready.set()
+        ring.run_callback(block, delay_s=0.2)  # lets go of the GIL, waits 0.2 s, runs the callback
+
+    thread = threading.Thread(target=call)
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1000.0)
+    try:
+        thread.start()
+        ready.wait()  # this thread gets the GIL back only when the other one lets go of it
+        deadline = time.monotonic() + 5.0
+        while ring.callbacks == 0 and time.monotonic() < deadline:
+            pass  # holds the GIL: no I/O, no sleep
+        ran = ring.callbacks
+    finally:
+        sys.setswitchinterval(interval)
+    thread.join()
+    assert ran == 1
+    np.testing.assert_array_equal(ring.read(), block)

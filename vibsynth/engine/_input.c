@@ -221,13 +221,26 @@ static PyObject *Ring_write(Ring *self, PyObject *arg) {
     return PyLong_FromLongLong(n);
 }
 
+/* Sleep `seconds` (the caller has released the GIL). */
+static void pause_s(double seconds) {
+    if (seconds <= 0.0) return;
+#ifdef _WIN32
+    Sleep((DWORD)(seconds * 1000.0));
+#else
+    struct timespec ts = {(time_t)seconds, (long)((seconds - (double)(time_t)seconds) * 1e9)};
+    nanosleep(&ts, NULL);
+#endif
+}
+
 /* Run the PortAudio callback on a float32 (frames, device_channels) block, or on `frames` frames
- * of no input (an int: PortAudio's NULL input): tests. */
+ * of no input (an int: PortAudio's NULL input), after `delay` seconds without the GIL: tests. */
 static PyObject *Ring_run_callback(Ring *self, PyObject *args) {
     PyObject *block;
     unsigned long status = 0;
+    double delay = 0.0;
     vs_pa_time_t ti = {0.0, 0.0, 0.0};
-    if (!PyArg_ParseTuple(args, "O|kddd", &block, &status, &ti.input_adc, &ti.current, &ti.output_dac)) return NULL;
+    if (!PyArg_ParseTuple(args, "O|kdddd", &block, &status, &ti.input_adc, &ti.current, &ti.output_dac, &delay))
+        return NULL;
     int rc;
     if (PyLong_Check(block)) {
         long long frames = PyLong_AsLongLong(block);
@@ -236,6 +249,7 @@ static PyObject *Ring_run_callback(Ring *self, PyObject *args) {
             return NULL;
         }
         Py_BEGIN_ALLOW_THREADS
+        pause_s(delay);
         rc = input_callback(NULL, NULL, (unsigned long)frames, &ti, status, self);
         Py_END_ALLOW_THREADS
         return PyLong_FromLong(rc);
@@ -243,6 +257,7 @@ static PyObject *Ring_run_callback(Ring *self, PyObject *args) {
     Py_buffer view;
     if (get_frames(block, &view, self->dev_channels, 0, "block") < 0) return NULL;
     Py_BEGIN_ALLOW_THREADS
+    pause_s(delay);
     rc = input_callback(view.buf, NULL, (unsigned long)view.shape[0], &ti, status, self);
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&view);
@@ -330,8 +345,8 @@ static PyMethodDef Ring_methods[] = {
     {"write", (PyCFunction)Ring_write, METH_O,
      "write(frames float32 (n, device_channels)) -> frames stored; the producer's side outside PortAudio"},
     {"run_callback", (PyCFunction)Ring_run_callback, METH_VARARGS,
-     "run_callback(block float32 (frames, device_channels) | frames, status=0, adc=0, current=0, dac=0) -> "
-     "paContinue; for tests"},
+     "run_callback(block float32 (frames, device_channels) | frames, status=0, adc=0, current=0, dac=0, "
+     "delay=0) -> paContinue, called after delay s without the GIL; for tests"},
     {"addresses", (PyCFunction)Ring_addresses, METH_NOARGS, "(PaStreamCallback address, userdata address)"},
     {"stamp", (PyCFunction)Ring_stamp, METH_NOARGS,
      "(first frame, adc, current, dac, monotonic) of the last callback's block, or None"},

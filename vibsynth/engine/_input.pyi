@@ -38,6 +38,7 @@ class InputRing:
         adc: float = 0.0,
         current: float = 0.0,
         dac: float = 0.0,
+        delay: float = 0.0,
         /,
     ) -> int: ...
     def addresses(self) -> tuple[int, int]: ...

@@ -155,9 +155,15 @@ class InputRing:
         adc_time: float = 0.0,
         current_time: float = 0.0,
         dac_time: float = 0.0,
+        delay_s: float = 0.0,
     ) -> int:
-        """Call the compiled PortAudio callback on a block (or on ``block`` frames of no input): tests."""
-        return self._ring.run_callback(block, int(status), float(adc_time), float(current_time), float(dac_time))
+        """Call the compiled PortAudio callback on a block (or on ``block`` frames of no input): tests.
+
+        The GIL is released first, then ``delay_s`` passes before the call (a test can take the GIL meanwhile).
+        """
+        return self._ring.run_callback(
+            block, int(status), float(adc_time), float(current_time), float(dac_time), float(delay_s)
+        )
 
     # -- state ----------------------------------------------------------------------------
     def stamp(self) -> BlockStamp | None:
