@@ -165,8 +165,9 @@ def _run(
         before, head = _primer(x, int(round(PRIME_S * fs)), int(round(SPLICE_S * fs)))
         after = _mirror_after(x, tail_len)
     else:
-        before, head = np.zeros(int(round(PRIME_S * fs))), x[:0]
-        after = np.zeros(tail_len)
+        dc = float(x[: int(fs)].mean()) if n else 0.0  # silence at the signal's offset: DC makes no step
+        before, head = np.full(int(round(PRIME_S * fs)), dc), x[:0]
+        after = np.full(tail_len, float(x[-int(fs) :].mean()) if n else 0.0)
     total_pad = before.size
     tracker.process(before)
     tracker.nonfinite_samples = tracker.clipped_samples = tracker.clamped_frames = 0

@@ -48,12 +48,13 @@ BALANCE_LIMITS = (-3.5, 3.5)
 
 
 def count_clipped(x: NDArray[np.float64]) -> int:
-    """Samples in flat-topped runs (>= 3 equal samples at the block's peak magnitude)."""
+    """Samples in flat-topped runs (>= 3 equal samples at the block's peak magnitude) of a block
+    that swings (a constant, DC, is not clipping)."""
     if x.size < 3:
         return 0
     mag = np.abs(x)
     peak = float(mag.max())
-    if peak <= 0:
+    if peak <= 0 or float(np.ptp(x)) < 0.5 * peak:
         return 0
     at_peak = (mag >= peak * (1 - 1e-7)).astype(np.int8)
     edges = np.flatnonzero(np.diff(np.concatenate(([0], at_peak, [0]))))
