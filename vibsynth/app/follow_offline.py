@@ -470,37 +470,65 @@ class FollowRender:
         return float(self.engine.fs)
 
 
+def _lifted(
+    f: AlignedFrames, pending: deque[tuple[int, float]], state: list[float], decay_s: float, fs: float
+) -> NDArray[np.float64]:
+    """The block's intensity with onsets overlaid: a peak at the first frame at or after each onset,
+    decaying linearly (in knob units) to the curve over ``decay_s``. ``state`` carries
+    ``[peak, peak_time]`` across blocks; onsets after the block's last frame stay in ``pending``."""
+    curve = f.intensity
+    n = curve.size
+    times = f.at / fs
+    peak = np.full(n, np.nan)
+    while pending and pending[0][0] <= f.at[-1]:
+        onset, strength = pending.popleft()
+        k = int(np.searchsorted(f.at, onset))
+        lifted = float(transient_peak(curve[k], np.float64(strength)))
+        if lifted > curve[k] and not lifted <= peak[k]:
+            peak[k] = lifted
+    has = ~np.isnan(peak)
+    last = np.maximum.accumulate(np.where(has, np.arange(n), -1))
+    carried = last < 0
+    peak_v = np.where(carried, state[0], peak[np.maximum(last, 0)])
+    peak_t = np.where(carried, state[1], times[np.maximum(last, 0)])
+    if has.any():
+        state[0], state[1] = float(peak_v[-1]), float(peak_t[-1])
+    u = (times - peak_t) / decay_s
+    with np.errstate(invalid="ignore"):
+        overlay = peak_v + (curve - peak_v) * u
+    return np.where(u < 1, np.maximum(curve, overlay), curve)
+
+
 def _cues(stream: FollowStream, fs_out: float, decay_s: float, progress: Progress | None) -> Iterator[Cue]:
     """Each aligned frame as a glide of one hop ending on its frame; onsets overlaid as decaying peaks.
 
     An onset is reported before the frames of its time (its path is faster than the level's):
-    it waits in ``pending`` until the first frame at or after it, whose intensity it lifts.
+    it waits in ``pending`` until the first frame at or after it, whose intensity it lifts. A
+    knob whose value did not change is not sent again.
     """
     ratio = fs_out / stream.fs
     hop_s = stream.tracker.hop / stream.fs
     hop_out = int(round(stream.tracker.hop * ratio))
-    last = {"intensity": math.nan, "balance": math.nan}
-    peak, peak_t = 0.0, -math.inf
+    previous = {"intensity": math.nan, "balance": math.nan}
+    state = [0.0, -math.inf]
     pending: deque[tuple[int, float]] = deque()
     for f in stream.blocks(progress):
         pending.extend(zip(f.onset_at.tolist(), f.onset_strength.tolist()))
-        times = f.at / stream.fs
-        for k in range(len(f)):
-            t, curve = float(times[k]), float(f.intensity[k])
-            strength = 0.0
-            while pending and pending[0][0] <= f.at[k]:
-                strength = max(strength, pending.popleft()[1])
-            if strength > 0:
-                lifted = float(transient_peak(np.float64(curve), np.float64(strength)))
-                if lifted > curve:
-                    peak, peak_t = lifted, t
-            u = (t - peak_t) / decay_s
-            value = max(curve, peak + (curve - peak) * u) if u < 1 else curve
-            frame = max(0, int(round(float(f.at[k]) * ratio)) - hop_out)
-            for knob, v in (("intensity", value), ("balance", float(f.balance[k]))):
-                if v != last[knob]:
-                    last[knob] = v
-                    yield Cue(frame, SetKnob(knob, v, glide_s=hop_s))  # type: ignore[arg-type]
+        if not len(f):
+            continue
+        frames = np.maximum(0, np.round(f.at * ratio).astype(np.int64) - hop_out).tolist()
+        values = {"intensity": _lifted(f, pending, state, decay_s, stream.fs), "balance": f.balance}
+        changed = {}
+        for knob, v in values.items():
+            before = np.concatenate(([previous[knob]], v[:-1]))
+            changed[knob] = (v != before).tolist()
+            previous[knob] = float(v[-1])
+        ivals, bvals = values["intensity"].tolist(), values["balance"].tolist()
+        for k, frame in enumerate(frames):
+            if changed["intensity"][k]:
+                yield Cue(frame, SetKnob("intensity", ivals[k], at_frame=frame, glide_s=hop_s))
+            if changed["balance"][k]:
+                yield Cue(frame, SetKnob("balance", bvals[k], at_frame=frame, glide_s=hop_s))
 
 
 def prepare_follow_render(

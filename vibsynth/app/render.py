@@ -134,7 +134,8 @@ class RenderResult:
 def _fire(cue: Cue, at_frame: int, source: Any) -> None:
     action = cue.action
     if isinstance(action, SetKnob | SetGlide | SetMute):
-        source.submit(dataclasses.replace(action, at_frame=at_frame))
+        # a command already stamped with its frame (render --follow's thousands a minute) is not copied
+        source.submit(action if action.at_frame == at_frame else dataclasses.replace(action, at_frame=at_frame))
     elif callable(action):
         action(at_frame)
     else:
