@@ -424,9 +424,20 @@ class Follower:
         self._set_live(focus=focus)
         return focus
 
+    def set_range(self, range_db: float) -> float:
+        """Set the audio mode's loudness range (dB, ``follow.range_db``'s range) of every route without its own."""
+        low, high = bounds_of("follow.range_db")
+        value = check_range("follow range (dB)", range_db, float(low or 0.0), float(high or 0.0))
+        self._set_live(range_db=value)
+        return value
+
     @property
     def gain_db(self) -> float:
         return self.live.gain_db
+
+    @property
+    def range_db(self) -> float:
+        return self.live.range_db
 
     @property
     def gate_db(self) -> float:
@@ -539,6 +550,7 @@ class Follower:
             "gain_db": self.gain_db,
             "gate_db": self.gate_db,
             "focus": self.focus,
+            "range_db": self.range_db,
             "lost": self.lost,
             "stale_frames": self.stale_frames,
             "overflows": int(status.get("overflows", 0)),

@@ -25,15 +25,16 @@ __all__ = ["LiveValues", "RouteSpec", "plan_routes", "route_params", "default_ga
 
 @dataclass(frozen=True)
 class LiveValues:
-    """The section-wide values that live controls change: gain (dB), gate (dB or None) and focus."""
+    """The section-wide values that live controls change: gain (dB), gate (dB or None), focus, range (dB)."""
 
     gain_db: float
     gate_db: float | None
     focus: Focus
+    range_db: float = TrackerParams.range_db
 
     @classmethod
     def of(cls, follow: Follow) -> LiveValues:
-        return cls(follow.gain_db, follow.gate_db, follow.focus)
+        return cls(follow.gain_db, follow.gate_db, follow.focus, follow.range_db)
 
 
 @dataclass(frozen=True)
@@ -109,7 +110,7 @@ def route_params(follow: Follow, live: LiveValues, route: FollowRoute) -> Tracke
         focus=route.focus or live.focus,
         gain_db=min(max(live.gain_db + route.gain_db, low), high),
         gate_db=default_gate_db(mode) if gate is None else gate,
-        range_db=follow.range_db if route.range_db is None else route.range_db,
+        range_db=live.range_db if route.range_db is None else route.range_db,
         attack_ms=follow.attack_ms if route.attack_ms is None else route.attack_ms,
         release_ms=follow.release_ms if route.release_ms is None else route.release_ms,
         transients=follow.transients if route.transients is None else route.transients,

@@ -110,7 +110,7 @@ def create(
         status_sources=status_sources(servers),
         learn=midi_learn,
     )
-    install_panels(server, servers)
+    install_panels(server, servers, settings)
     return server
 
 

@@ -7,6 +7,7 @@ import { mountSpectrum } from "./spectrum.js";
 import { mountPresets } from "./presets.js";
 import { mountRecording } from "./recording.js";
 import { mountStatus } from "./status.js";
+import { mountFollow } from "./follow.js";
 
 const RECONNECT_MIN_MS = 250;
 const RECONNECT_MAX_MS = 5000;
@@ -190,4 +191,5 @@ mountSpectrum(studio);
 mountPresets(studio);
 mountRecording(studio);
 mountStatus(studio);
+mountFollow(studio);
 studio.connect();
