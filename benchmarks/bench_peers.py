@@ -6,6 +6,7 @@
     python benchmarks/bench_peers.py --only scsynth,pyo --trials 20 --json /tmp/p.json
     python benchmarks/bench_peers.py --vibsynth-rev HEAD      # vibsynth of the last commit, not the tree
     python benchmarks/bench_peers.py --vibsynth-src /tmp/vs   # vibsynth from a built source folder
+    python benchmarks/bench_peers.py --vibsynth-ref /tmp/old  # + a second vibsynth, interleaved (before/after)
 
 No wrapper is needed: every peer gets its own private JACK server on the dummy driver
 (``jackd -n bench-peers-<peer> -R -d dummy -r 48000 -p 128``, without ``-R`` when real-time
@@ -875,13 +876,17 @@ class PyoTarget(Target):
 class VibsynthTarget(Target):
     name = "vibsynth"
 
+    def source(self) -> tuple[Path, str]:
+        """The folder vibsynth runs from, and its description."""
+        return self.args.vibsynth_src_dir or ROOT, self.args.vibsynth_source
+
     def start(self) -> None:
-        src = self.args.vibsynth_src_dir or ROOT
+        src, label = self.source()
         exe = ROOT / ".venv" / "bin" / "vibsynth"
         # the working tree through the venv's console script, or a snapshot (--vibsynth-rev)
         # with ``python -m vibsynth`` run from inside it (so that it is the one imported)
         base = [str(exe)] if exe.exists() and src == ROOT else [sys.executable, "-m", "vibsynth"]
-        config = self.tmp / "vibsynth.yaml"
+        config = self.tmp / f"{self.name}.yaml"
         config.write_text(
             "version: 1\n"
             f"audio:\n  host_api: JACK\n  rate: {self.jackd.rate}\n  block_size: {self.jackd.period}\n  channels: 1\n"
@@ -904,13 +909,13 @@ class VibsynthTarget(Target):
             "command": " ".join(["vibsynth"] + cmd[len(base) :]),
             "config": config.read_text(),
             "flood": f"/vibsynth/{self.args.vibsynth_flood}",
-            "source": self.args.vibsynth_source,
+            "source": label,
         }
         self.proc = spawn(cmd, env=env, log=self.log, cwd=src)
         self.osc = OscClient(self.port)
         self._wait_ready(lambda: self.osc.request(osc_message("/vibsynth/ping", 1), "/vibsynth/pong", 0.3), 180)
         st = self.status()
-        self.version = f"vibsynth {st.get('version', '?')} ({self.args.vibsynth_source})"
+        self.version = f"vibsynth {st.get('version', '?')} ({label})"
         self.osc.send(osc_message("/vibsynth/glide", 0.0))
         self.osc.send(osc_message("/vibsynth/texture", 0.0, 0.0))
         self.osc.request(osc_message("/vibsynth/sync", 1), "/vibsynth/synced", 5.0)
@@ -940,7 +945,18 @@ class VibsynthTarget(Target):
         return [osc_message("/vibsynth/texture", 0.8 if n % 2 else 0.7, v) for n, v in enumerate(vals)]
 
 
-TARGETS = {"scsynth": ScsynthTarget, "pyo": PyoTarget, "vibsynth": VibsynthTarget}
+class VibsynthRefTarget(VibsynthTarget):
+    """A second vibsynth from ``--vibsynth-ref DIR`` (built in place), interleaved with the first:
+    a before/after comparison under the very same load."""
+
+    name = "vibsynth-ref"
+
+    def source(self) -> tuple[Path, str]:
+        return self.args.vibsynth_ref.resolve(), f"source folder {self.args.vibsynth_ref.resolve()}"
+
+
+TARGETS = {"scsynth": ScsynthTarget, "pyo": PyoTarget, "vibsynth": VibsynthTarget, "vibsynth-ref": VibsynthRefTarget}
+REFERENCE = "vibsynth-ref"
 
 
 def vibsynth_snapshot(rev: str, tmp: Path) -> tuple[Path, str]:
@@ -1178,12 +1194,26 @@ def latency_trials(target: Target, agent: JackAgent, source: str, trials: int, g
         agent.capture_close()
 
 
+TRIAL_COLUMNS = ("round", "position", "before_cycle", "wall_s", "frame_s", "wait_s", "cycles_after", "rejected")
+
+
+def trial_log(trials: list[dict]) -> dict:
+    """Every trial, by column (times rounded to 1 us): what the JSON keeps of the idle trials."""
+
+    def value(t: dict, key: str):
+        v = t.get(key)
+        return round(v, 4 if key == "before_cycle" else 6) if isinstance(v, float) else v
+
+    return {key: [value(t, key) for t in trials] for key in TRIAL_COLUMNS}
+
+
 def _ms(values) -> list[float]:
     return [1e3 * v for v in values]
 
 
-def _lat_summary(values_s: list[float]) -> dict:
-    """Median (with its 95 % order-statistic interval), p95, mean, range of latencies in seconds."""
+def _lat_summary(values_s: list[float], keep_all: bool = True) -> dict:
+    """Median (with its 95 % order-statistic interval), p95, mean, range (and, ``keep_all``, every
+    value) of latencies in seconds."""
     if not values_s:
         return {"median_ms": None, "p95_ms": None, "min_ms": None, "max_ms": None, "not_positive": 0, "all_ms": []}
     ms = _ms(values_s)
@@ -1196,7 +1226,7 @@ def _lat_summary(values_s: list[float]) -> dict:
         "min_ms": min(ms),
         "max_ms": max(ms),
         "not_positive": sum(1 for x in values_s if x <= 0),
-        "all_ms": [round(x, 3) for x in ms],
+        **({"all_ms": [round(x, 3) for x in ms]} if keep_all else {}),
     }
 
 
@@ -1217,9 +1247,9 @@ def summarise_trials(results: list[dict], clock: str) -> dict:
         "trials": len(ok),
         "clock": clock,
         **_lat_summary([t[f"{clock}_s"] for t in ok]),
-        "frame_clock": _lat_summary([t["frame_s"] for t in ok]),
-        "wall_clock": _lat_summary([t["wall_s"] for t in ok]),
-        "wait_to_next_cycle": _lat_summary([t["wait_s"] for t in placed]),
+        "frame_clock": _lat_summary([t["frame_s"] for t in ok], keep_all=False),
+        "wall_clock": _lat_summary([t["wall_s"] for t in ok], keep_all=False),
+        "wait_to_next_cycle": _lat_summary([t["wait_s"] for t in placed], keep_all=False),
         "excess_mean_ms": float(np.mean(excess)) if excess else None,
         "cycle_taken": {
             "meaning": "-1 the cycle running at the send, 0 the next, 1 one missed, 2 two or more",
@@ -1489,7 +1519,10 @@ def compare_idle(trials: dict[str, list[dict]], rounds: int, clock: str) -> dict
     names, m = round_matrix(ok, f"{clock}_s", rounds)
     m = 1e3 * m
     v = names.index("vibsynth")
-    others = [k for k, n in enumerate(names) if n != "vibsynth"]
+    others = [k for k, n in enumerate(names) if n not in ("vibsynth", REFERENCE)]
+    if not others:
+        return {}
+    ref = names.index(REFERENCE) if REFERENCE in names else None
 
     def med(x: np.ndarray) -> np.ndarray:
         return np.nanmedian(x, axis=1)  # (batch, systems)
@@ -1526,9 +1559,10 @@ def compare_idle(trials: dict[str, list[dict]], rounds: int, clock: str) -> dict
             names[k]: list(paired_bootstrap(e, lambda x, k=k: np.nanmean(x, axis=1)[:, k])) for k in range(len(names))
         }
         out["excess_difference_ms"] = {
-            names[k]: list(paired_bootstrap(e, lambda x, k=k: excess_diff(x, k))) for k in others
+            names[k]: list(paired_bootstrap(e, lambda x, k=k: excess_diff(x, k)))
+            for k in others + ([ref] if ref is not None else [])
         }
-    for k in others:
+    for k in others + ([ref] if ref is not None else []):
         out["per_peer"][names[k]] = {
             "ratio": list(paired_bootstrap(m, lambda x, k=k: med(x)[:, v] / med(x)[:, k])),
             "difference_ms": list(paired_bootstrap(m, lambda x, k=k: med(x)[:, v] - med(x)[:, k])),
@@ -1627,30 +1661,30 @@ def _print_head(head: str) -> None:
 
 def print_table(peers: dict, idle: dict | None = None) -> None:
     _print_head(
-        f"{'peer':<9} {'phase':<8} {'CPU %':>6} {'DSP %':>6} {'xruns':>5} {'underfl':>7} {'drv late':>8} "
+        f"{'peer':<12} {'phase':<8} {'CPU %':>6} {'DSP %':>6} {'xruns':>5} {'underfl':>7} {'drv late':>8} "
         f"{'lat med':>7} {'95% CI':>12} {'lat p95':>7} {'n':>4}  {'sent/s':>7}"
     )
     for peer, entry in peers.items():
         if "skipped" in entry:
-            print(f"{peer:<9} SKIPPED: {entry['skipped']}")
+            print(f"{peer:<12} SKIPPED: {entry['skipped']}")
             continue
         base = entry.get("baseline")
         if base:
             print(
-                f"{peer:<9} {'(jack)':<8} {'-':>6} {_fmt(base['dsp_load_mean_pct']):>6} {'-':>5} {'-':>7} "
+                f"{peer:<12} {'(jack)':<8} {'-':>6} {_fmt(base['dsp_load_mean_pct']):>6} {'-':>5} {'-':>7} "
                 f"{base['driver_late_wakeups']:>8}"
             )
         for phase, r in entry.get("phases", {}).items():
             w, tot, lat = r["window"], r.get("phase_total", r["window"]), r.get("latency", {})
             sent = r.get("sender", {}).get("rate")
             print(
-                f"{peer:<9} {phase:<8} {_fmt(w['cpu_pct']):>6} {_fmt(w['dsp_load_mean_pct']):>6} "
+                f"{peer:<12} {phase:<8} {_fmt(w['cpu_pct']):>6} {_fmt(w['dsp_load_mean_pct']):>6} "
                 f"{tot['target_late_cycles']:>5} {_fmt(w.get('status_underflows'), 'd'):>7} "
                 f"{tot['driver_late_wakeups']:>8} {_fmt(lat.get('median_ms'), '.2f'):>7} {_ci(lat):>12} "
                 f"{_fmt(lat.get('p95_ms'), '.2f'):>7} {lat.get('trials', 0):>4}  {_fmt(sent, '.0f'):>7}"
             )
         if "error" in entry:
-            print(f"{peer:<9} FAILED: {entry['error'].splitlines()[0]}")
+            print(f"{peer:<12} FAILED: {entry['error'].splitlines()[0]}")
     print(
         "CPU % = target process (all threads), % of one core, over the window; DSP % = JACK's load (mean); "
         "xruns = cycles jackd reports the target's client late (window + latency trials); underfl = vibsynth "
@@ -1674,7 +1708,7 @@ def print_idle(peers: dict, idle: dict) -> None:
         + " %)"
     )
     _print_head(
-        f"{'peer':<9} {'median':>7} {'95% CI':>14} {'mean':>6} {'wait':>6} {'excess':>7} "
+        f"{'peer':<12} {'median':>7} {'95% CI':>14} {'mean':>6} {'wait':>6} {'excess':>7} "
         f"{'cur':>5} {'next':>5} {'miss':>5} {'n':>4}"
     )
     for peer, entry in peers.items():
@@ -1684,7 +1718,7 @@ def print_idle(peers: dict, idle: dict) -> None:
         hist = lat["cycle_taken"]
         placed = max(1, hist["-1"] + hist["0"] + hist["1"] + hist["2"])
         print(
-            f"{peer:<9} {lat['median_ms']:>7.3f} {_ci(lat).replace(', ', ','):>14} {lat['mean_ms']:>6.3f} "
+            f"{peer:<12} {lat['median_ms']:>7.3f} {_ci(lat).replace(', ', ','):>14} {lat['mean_ms']:>6.3f} "
             f"{_fmt(lat['wait_to_next_cycle']['mean_ms'], '.3f'):>6} {_fmt(lat['excess_mean_ms'], '.3f'):>7} "
             f"{100 * hist['-1'] / placed:>4.0f}% {100 * hist['0'] / placed:>4.0f}% "
             f"{100 * (hist['1'] + hist['2']) / placed:>4.0f}% {lat['trials']:>4}"
@@ -1820,22 +1854,7 @@ def run_stages(runs: list[PeerRun], args, result: dict) -> None:
         for run in live:
             phase = run.entry["phases"]["idle"]
             phase["latency"] = dict(summarise_trials(trials[run.peer], args.latency_clock), interleaved=True)
-            phase["latency"]["trial_log"] = [
-                {
-                    k: t.get(k)
-                    for k in (
-                        "round",
-                        "position",
-                        "before_cycle",
-                        "wall_s",
-                        "frame_s",
-                        "wait_s",
-                        "cycles_after",
-                        "rejected",
-                    )
-                }
-                for t in trials[run.peer]
-            ]
+            phase["latency"]["trial_log"] = trial_log(trials[run.peer])
             phase["latency_window"] = stage["windows"][run.peer]
             phase["phase_total"] = _sum_windows(phase["window"], phase["latency_window"])
         result["idle_latency"] = {
@@ -1848,6 +1867,14 @@ def run_stages(runs: list[PeerRun], args, result: dict) -> None:
             run.entry["phases"]["flood"] = flood_phase(run, args, run.tmp)
         except Exception as exc:
             run.fail(exc)
+
+
+_SCALARS = re.compile(r"\[\s+((?:-?[0-9.eE+-]+|null|true|false)(?:,\s+(?:-?[0-9.eE+-]+|null|true|false))*)\s+\]")
+
+
+def compact_json(obj) -> str:
+    """JSON indented by 2, but each list of numbers on one line (the trial logs stay readable)."""
+    return _SCALARS.sub(lambda m: "[" + " ".join(m.group(1).split()) + "]", json.dumps(obj, indent=2))
 
 
 # ------------------------------------------------------------------ main
@@ -1911,6 +1938,14 @@ def main(argv: list[str] | None = None) -> int:
         help="run vibsynth from this source folder (its C core already built in place) instead of the working tree",
     )
     parser.add_argument(
+        "--vibsynth-ref",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="also run a second vibsynth, 'vibsynth-ref', from this source folder (C core built in place), "
+        "interleaved with the others: before/after under the same load",
+    )
+    parser.add_argument(
         "--vibsynth-rev",
         default=None,
         metavar="REV",
@@ -1941,6 +1976,8 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [p for p in peers if p not in PEERS]
     if unknown:
         parser.error(f"unknown peer(s) {unknown}; choose from {', '.join(PEERS)}")
+    if args.vibsynth_ref is not None:
+        peers.append(REFERENCE)
     for tool in ("jackd", "jack_wait"):
         if shutil.which(tool) is None:
             print(f"bench_peers: {tool} not found (Debian: apt-get install jackd2)", file=sys.stderr)
@@ -2008,6 +2045,8 @@ def main(argv: list[str] | None = None) -> int:
                 args.vibsynth_src_dir = args.vibsynth_src.resolve()
                 args.vibsynth_source = f"source folder {args.vibsynth_src_dir}"
             result["settings"]["vibsynth_source"] = args.vibsynth_source if "vibsynth" in peers else None
+            if args.vibsynth_ref is not None:
+                result["settings"]["vibsynth_ref_source"] = str(args.vibsynth_ref.resolve())
             if "vibsynth" in peers:
                 result["machine"]["versions"]["vibsynth"] = args.vibsynth_source
             runs = []
@@ -2067,12 +2106,12 @@ def main(argv: list[str] | None = None) -> int:
                 e["kept_from_run_of"] = e.get("kept_from_run_of", old.get("when"))
             if kept:
                 out["peers"] = {**result["peers"], **kept}
-                out["peers"] = {p: out["peers"][p] for p in PEERS if p in out["peers"]}
+                out["peers"] = {p: out["peers"][p] for p in (*PEERS, REFERENCE) if p in out["peers"]}
                 print(f"(kept from {args.json.name}: {', '.join(kept)})")
         except (OSError, ValueError) as exc:
             print(f"bench_peers: not merging with {args.json} ({exc})", file=sys.stderr)
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(out, indent=2), encoding="utf-8")
+    args.json.write_text(compact_json(out), encoding="utf-8")
     print(f"\nJSON: {args.json}")
     return status
 
