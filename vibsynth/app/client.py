@@ -74,7 +74,9 @@ MAX_BUNDLE_DEPTH = 8
 #: :meth:`Client.at` reads numbers below this as seconds from now, others as Unix time.
 RELATIVE_LIMIT_S = 1e9
 
-GETTABLE = ("intensity", "balance", "texture", "glide", "mute", "preset", "driver")
+GETTABLE = ("intensity", "balance", "texture", "glide", "mute", "preset", "driver", "follow")
+#: What :meth:`Client.follow_setting` reads (live Follow, docs/follow.md).
+FOLLOW_SETTINGS = ("gain", "gate", "focus")
 
 _BUNDLE_TAG = b"#bundle\x00"
 _MAX_PENDING_ERRORS = 256
@@ -527,6 +529,33 @@ class _Commands:
         args = () if release_ms is None else (_number("release (ms)", release_ms, 0.0),)
         self._emit(encode_message(self._address("stop", channel), args, "f" * len(args)))
 
+    def set_follow(self, on: bool = True, channel: int | None = None) -> None:
+        """Follow the input on a channel (live Follow, docs/follow.md), or hand it back to its knobs.
+
+        Parameters
+        ----------
+        on : bool
+            True = the channel follows; False = its knobs play again.
+        channel : int, optional
+            1-based channel; None = every channel (the server refuses a channel no route follows into).
+        """
+        address = f"{self._prefix}/ch/*/follow" if channel is None else self._address("follow", channel)
+        self._emit(encode_message(address, (1 if on else 0,), "i"))
+
+    def set_follow_gain(self, db: float) -> None:
+        """Live Follow's gain in dB, added to the tracked level (the server checks ``follow.gain_db``'s range)."""
+        self._emit(encode_message(f"{self._prefix}/follow/gain", (_number("follow gain (dB)", db),), "f"))
+
+    def set_follow_gate(self, db: float) -> None:
+        """Live Follow's gate in dB: below this input level the output is silent (``follow.gate_db``'s range)."""
+        self._emit(encode_message(f"{self._prefix}/follow/gate", (_number("follow gate (dB)", db),), "f"))
+
+    def set_follow_focus(self, focus: str) -> None:
+        """Live Follow's focus in audio mode: ``all``, ``effects``, ``bass`` or ``beat`` (docs/follow.md)."""
+        if not isinstance(focus, str) or not focus:
+            raise ParameterError(f"focus must be a non-empty string, got {focus!r}")
+        self._emit(encode_message(f"{self._prefix}/follow/focus", (focus,), "s"))
+
 
 # ---------------------------------------------------------------------- bundles
 class Bundle(_Commands):
@@ -969,7 +998,7 @@ class Client(_Commands):
         self, what: Literal["intensity", "balance", "glide"], channel: int = 1, timeout: float | None = None
     ) -> float: ...
     @overload
-    def get(self, what: Literal["mute"], channel: int = 1, timeout: float | None = None) -> bool: ...
+    def get(self, what: Literal["mute", "follow"], channel: int = 1, timeout: float | None = None) -> bool: ...
     @overload
     def get(self, what: Literal["preset"], channel: int = 1, timeout: float | None = None) -> str | None: ...
     @overload
@@ -988,7 +1017,7 @@ class Client(_Commands):
 
         Parameters
         ----------
-        what : {"intensity", "balance", "texture", "glide", "mute", "preset", "driver"}
+        what : {"intensity", "balance", "texture", "glide", "mute", "preset", "driver", "follow"}
         channel : int
             1-based channel.
         timeout : float, optional
@@ -999,8 +1028,8 @@ class Client(_Commands):
         float, bool, str, tuple or None
             intensity, balance: float; glide: float (ms); mute: bool; preset: str, or None when
             no preset is applied; texture: ``(intensity, balance)``; driver: the layer the channel
-            plays, ``"knobs"``, ``"sources"`` or ``"clip"``. Floats come as OSC
-            float32 (``0.6`` reads ``0.6000000238418579``).
+            plays, ``"knobs"``, ``"follow"``, ``"sources"`` or ``"clip"``; follow: whether the channel
+            follows the input (live Follow). Floats come as OSC float32 (``0.6`` reads ``0.6000000238418579``).
 
         Raises
         ------
@@ -1026,7 +1055,7 @@ class Client(_Commands):
             args = reply.args
             if what == "texture":
                 ok = len(args) == 2 and numeric(args[0]) and numeric(args[1])
-            elif what == "mute":
+            elif what in ("mute", "follow"):
                 ok = len(args) == 1 and (numeric(args[0]) or isinstance(args[0], bool))
             elif what in ("preset", "driver"):
                 ok = len(args) == 1 and isinstance(args[0], str)
@@ -1040,7 +1069,7 @@ class Client(_Commands):
         value = reply.args
         if what == "texture":
             return float(value[0]), float(value[1])
-        if what == "mute":
+        if what in ("mute", "follow"):
             return bool(value[0])
         if what == "preset":
             return value[0] or None
@@ -1076,6 +1105,34 @@ class Client(_Commands):
 
         name, position, left = self.request(f"{base}/get", "clip", types="s", match=match, timeout=timeout).args
         return None if not name else (str(name), float(position), int(left))
+
+    def follow_setting(self, name: str, timeout: float | None = None) -> float | str:
+        """Live Follow's ``gain`` (dB), ``gate`` (dB) or ``focus`` (a name), as the server holds it.
+
+        Raises
+        ------
+        ParameterError
+            An unknown name.
+        ServerError
+            The server refused (e.g. follow is not running: serve without ``--follow``).
+        NoReplyError
+            No answer within the timeout.
+        """
+        if name not in FOLLOW_SETTINGS:
+            raise ParameterError(f"unknown follow setting {name!r}; known: {', '.join(FOLLOW_SETTINGS)}")
+        want = f"{self._prefix}/follow/{name}"
+        kind = str if name == "focus" else (int, float)
+
+        def match(reply: Reply) -> bool:
+            if reply.address != want:
+                return False
+            ok = len(reply.args) == 1 and isinstance(reply.args[0], kind) and not isinstance(reply.args[0], bool)
+            if not ok:
+                self.stats.malformed += 1
+            return ok
+
+        value = self.request(f"{self._prefix}/follow/get", name, types="s", match=match, timeout=timeout).args[0]
+        return str(value) if name == "focus" else float(value)
 
     def status(self, timeout: float | None = None) -> dict[str, Any]:
         """The server's ``/status.reply`` as a dict (docs/osc.md lists the keys).

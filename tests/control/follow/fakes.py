@@ -1,4 +1,5 @@
-"""A fake input source (a real InputRing the test writes into) and seeded test signals."""
+"""A fake input source (a real InputRing the test writes into), seeded test signals, and the rig of a
+real engine + controller + follower on it, stepped by hand."""
 
 from __future__ import annotations
 
@@ -6,7 +7,14 @@ from typing import Any
 
 import numpy as np
 
+from vibsynth.control.controller import Controller
+from vibsynth.control.follow.follower import Follower
+from vibsynth.engine.engine import Engine
 from vibsynth.engine.input_ring import InputRing
+from vibsynth.settings.models_config import VibsynthConfig
+
+#: The rig's rate (a small bank builds fast).
+FS = 16000.0
 
 
 class FakeInput:
@@ -49,3 +57,40 @@ def tone(fs: float, seconds: float, rms: float, hz: float = 140.0, start: int = 
     n = int(round(seconds * fs))
     t = (start + np.arange(n)) / fs
     return (np.sqrt(2.0) * rms * np.sin(2 * np.pi * hz * t)).astype(np.float64)
+
+
+class Rig:
+    """Engine + controller + fake input + follower, stepped by hand: ``feed(x)`` writes, tracks and renders."""
+
+    def __init__(self, bank, basis, *, channels: int = 2, inputs: int = 1, follow: dict[str, Any] | None = None):
+        self.settings = VibsynthConfig.model_validate(
+            {"audio": {"channels": channels}, "follow": {"enabled": True, **(follow or {})}}
+        )
+        self.engine = Engine(bank, channels=channels, glide_s=0.0, max_block=256)
+        self.controller = Controller(self.engine, initial_glide_s=0.0)
+        self.source = FakeInput(inputs, FS)
+        self.clock = Clock()
+        self.follower = Follower(
+            self.controller, self.source, self.settings.follow, knobs=self.settings.knobs, basis=basis, clock=self.clock
+        )
+        self.source.open()
+        self.follower.prepare()
+
+    def feed(self, x, block: int = 128) -> None:
+        """Write ``x`` (n,) or (n, inputs) a block at a time; after each, one step and one rendered block."""
+        for i in range(0, len(x), block):
+            self.source.write(x[i : i + block])
+            self.follower.step()
+            self.engine.render(block)
+            self.clock.t += block / FS
+
+    def idle(self, seconds: float, block: int = 128) -> None:
+        """Time passes with no input (steps and renders)."""
+        for _ in range(int(seconds * FS / block)):
+            self.follower.step()
+            self.engine.render(block)
+            self.clock.t += block / FS
+
+    def plays(self, channel: int) -> tuple[float, float]:
+        k, b, _ = self.engine.knob_values()[channel]
+        return k, b
