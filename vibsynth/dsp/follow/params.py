@@ -81,7 +81,7 @@ class TrackerParams:
     range_db: float = 40.0
     top_db: float = -10.0
     attack_ms: float = 5.0
-    release_ms: float = 120.0
+    release_ms: float = 10.0
     level_ms: float = 10.0
     balance_ms: float = 100.0
     hop_ms: float = 2.7

@@ -162,6 +162,8 @@ class Tracker:
         self._meter: LevelMeter | None = None
         if p.mode == "vibration" and self.factor > 1:
             self._meter = LevelMeter(self.fs, p.level_ms)
+            assert isinstance(self.analyzer, VibrationAnalyzer)
+            self.analyzer.measure_level = False
             self.filter_delay_s = self._meter.delay_s
             window_s = self._meter.window / self.fs
         else:
@@ -283,5 +285,5 @@ class Tracker:
                 knob = 1.0 + (drive + p.gain_db - p.top_db) / p.range_db
         clamped = gate & ((knob > 1.0) | (knob < KNOB_FLOOR))
         self.clamped_frames += int(np.count_nonzero(clamped))
-        intensity = np.where(gate, np.clip(np.nan_to_num(knob, nan=0.0, neginf=0.0), KNOB_FLOOR, 1.0), 0.0)
+        intensity = np.where(gate & np.isfinite(knob), np.clip(knob, KNOB_FLOOR, 1.0), 0.0)
         return intensity, gate
