@@ -26,11 +26,9 @@ listens, clients and rates are bounded. Every refusal is one clear answer, count
 from __future__ import annotations
 
 import asyncio
-import errno
 import ipaddress
 import json
 import logging
-import os
 import threading
 from collections import Counter, deque
 from collections.abc import Callable
@@ -40,11 +38,12 @@ from typing import Any
 from aiohttp import WSCloseCode, WSMsgType, web
 
 from vibsynth.control.controller import Controller, KnobEvent
+from vibsynth.control.loop_server import LoopServer
 from vibsynth.control.osc.codec import encode_message
 from vibsynth.control.osc.handler import OscHandler
 from vibsynth.control.oscquery.tree import ATTRIBUTES, Tree
 from vibsynth.control.studio.commands import Throttle
-from vibsynth.errors import ConfigError, VibsynthError
+from vibsynth.errors import VibsynthError
 
 __all__ = [
     "OscQueryServer",
@@ -156,7 +155,7 @@ class _WsPeer:
         return self.server._enqueue(self.client, data)
 
 
-class OscQueryServer:
+class OscQueryServer(LoopServer):
     """The OSCQuery server (a ControlServer: ``start``, ``stop``, ``describe``).
 
     Parameters
@@ -182,6 +181,8 @@ class OscQueryServer:
     """
 
     name = "oscquery"
+    title = "OSCQuery"
+    bind_hint = "(set discovery.oscquery_port or --oscquery-port, or --no-discovery)"
 
     def __init__(
         self,
@@ -198,13 +199,10 @@ class OscQueryServer:
         local_names: tuple[str, ...] = (),
         port_fallback: bool = False,
     ) -> None:
+        super().__init__(host, port, port_fallback=port_fallback)
         self.tree = tree
         self.handler = handler
         self.controller = controller
-        self.host = host
-        self.requested_port = int(port)
-        self.port = int(port)
-        self.port_fallback = port_fallback
         self.osc_host = osc_host
         self.osc_port = int(osc_port)
         self.allow = allow
@@ -218,11 +216,6 @@ class OscQueryServer:
         self._scheduled = False
         self._next_id = 0
         self._http = Throttle(rate=HTTP_RATE, burst=HTTP_RATE)
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-        self._ready = threading.Event()
-        self._start_error: BaseException | None = None
-        self._runner: web.AppRunner | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._unsubscribe: Callable[[], None] | None = None
         self._last_polled: dict[str, bytes] = {}
@@ -273,19 +266,7 @@ class OscQueryServer:
         ConfigError
             The address cannot be bound.
         """
-        self._ready.clear()
-        self._thread = threading.Thread(target=self._run, name="vibsynth-oscquery", daemon=True)
-        self._thread.start()
-        self._ready.wait()
-        if self._start_error is not None:
-            self._thread.join(5.0)
-            self._thread = None
-            exc = self._start_error
-            reason = os.strerror(exc.errno) if isinstance(exc, OSError) and exc.errno else str(exc)
-            raise ConfigError(
-                f"OSCQuery: cannot listen on {self.host}:{self.requested_port}: {reason} "
-                "(set discovery.oscquery_port or --oscquery-port, or --no-discovery)"
-            ) from None
+        self.start_loop("vibsynth-oscquery")
         self._unsubscribe = self.controller.subscribe(self._on_knob_event)
         log.info("%s", self.describe())
 
@@ -294,57 +275,21 @@ class OscQueryServer:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
-        loop, thread = self._loop, self._thread
-        if loop is not None and thread is not None and thread.is_alive():
-            loop.call_soon_threadsafe(loop.stop)
-            thread.join(5.0)
-        self._thread = None
+        self.stop_loop()
 
-    def _run(self) -> None:
-        loop = asyncio.new_event_loop()
-        asyncio.set_event_loop(loop)
-        self._loop = loop
-        try:
-            loop.run_until_complete(self._startup())
-        except Exception as exc:  # noqa: BLE001 - reported by start() in the caller's thread
-            self._start_error = exc
-            self._ready.set()
-            loop.run_until_complete(self._cleanup())
-            loop.close()
-            return
-        self._ready.set()
-        try:
-            loop.run_forever()
-        finally:
-            loop.run_until_complete(self._cleanup())
-            loop.close()
-
-    async def _startup(self) -> None:
+    async def _make_app(self) -> web.Application:
         app = web.Application(client_max_size=MAX_MESSAGE_BYTES)
         app.router.add_route("*", "/{tail:.*}", self._request)
-        self._runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
-        await self._runner.setup()
-        try:
-            site = web.TCPSite(self._runner, self.host, self.requested_port)
-            await site.start()
-        except OSError as exc:
-            if not (self.port_fallback and exc.errno == errno.EADDRINUSE):
-                raise
-            log.warning("OSCQuery: port %d is in use; listening on a free port instead", self.requested_port)
-            site = web.TCPSite(self._runner, self.host, 0)
-            await site.start()
-        server = site._server  # noqa: SLF001 - aiohttp exposes the bound port only here
-        sockets = getattr(server, "sockets", None) or []
-        self.port = int(sockets[0].getsockname()[1]) if sockets else self.requested_port
+        return app
+
+    async def _bound(self) -> None:
         self._tasks = [asyncio.ensure_future(self._poll()), asyncio.ensure_future(self._refresh())]
 
-    async def _cleanup(self) -> None:
+    async def _closing(self) -> None:
         for task in self._tasks:
             task.cancel()
         for client in list(self.clients):
             await client.ws.close(code=WSCloseCode.GOING_AWAY, message=b"vibsynth is stopping")
-        if self._runner is not None:
-            await self._runner.cleanup()
 
     # ------------------------------------------------------------------ HTTP
     def _refuse(self, reason: str, status: int, text: str) -> web.Response:

@@ -21,10 +21,7 @@ Routes (all behind :class:`~vibsynth.control.studio.security.Gate`):
 from __future__ import annotations
 
 import asyncio
-import errno
 import logging
-import os
-import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
@@ -35,6 +32,7 @@ from aiohttp import WSCloseCode, WSMsgType, web
 
 from vibsynth._version import __version__
 from vibsynth.control.controller import Controller, KnobEvent
+from vibsynth.control.loop_server import LoopServer
 from vibsynth.control.studio.commands import (
     ALWAYS,
     COALESCED,
@@ -78,7 +76,7 @@ def _static_files(folder: Path) -> dict[str, Path]:
     }
 
 
-class StudioServer:
+class StudioServer(LoopServer):
     """The studio (the adapter's ControlServer: ``start``, ``stop``, ``describe``).
 
     Parameters
@@ -101,6 +99,8 @@ class StudioServer:
     """
 
     name = "studio"
+    title = "studio"
+    bind_hint = "(set studio.port or --studio-port, or --no-studio)"
 
     def __init__(
         self,
@@ -115,10 +115,8 @@ class StudioServer:
         status_sources: Sequence[Callable[[], list[tuple[str, object]]]] = (),
         learn: Callable[[str], bool] | None = None,
     ) -> None:
+        super().__init__(host, port, port_fallback=port_fallback)
         self.controller = controller
-        self.host = host
-        self.requested_port = int(port)
-        self.port = int(port)
         self.token = token or new_token()
         self.library = library
         self.extensions = tuple(extensions)
@@ -127,17 +125,11 @@ class StudioServer:
             ext.check()
         if len(set(names)) != len(names):
             raise ConfigError(f"studio extensions with the same name: {', '.join(sorted(names))}")
-        self.port_fallback = port_fallback
         self.status_sources = tuple(status_sources)
         self.learn = learn
         self.gate: Gate | None = None
         self.hub: Hub | None = None
         self.workers = ThreadPoolExecutor(max_workers=2, thread_name_prefix="vibsynth-studio-work")
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-        self._ready = threading.Event()
-        self._start_error: BaseException | None = None
-        self._runner: web.AppRunner | None = None
         self._unsubscribe: Callable[[], None] | None = None
         self._static = _static_files(static_dir())
         self._on_pages_changed: list[Callable[[int], None]] = []
@@ -168,22 +160,7 @@ class StudioServer:
         ConfigError
             The address cannot be bound (port in use without fallback, unknown host...).
         """
-        self._ready.clear()
-        self._start_error = None
-        self._thread = threading.Thread(target=self._run, name="vibsynth-studio", daemon=True)
-        self._thread.start()
-        self._ready.wait()
-        if self._start_error is not None:
-            self._thread.join(5.0)
-            self._thread = None
-            exc = self._start_error
-            if isinstance(exc, VibsynthError):
-                raise exc
-            reason = os.strerror(exc.errno) if isinstance(exc, OSError) and exc.errno else str(exc)
-            raise ConfigError(
-                f"studio: cannot listen on {self.host}:{self.requested_port}: {reason} "
-                "(set studio.port or --studio-port, or --no-studio)"
-            ) from None
+        self.start_loop("vibsynth-studio")
         for plugin in self.plugins:
             plugin.start()
         self._unsubscribe = self.controller.subscribe(self._on_knob_event)
@@ -196,59 +173,21 @@ class StudioServer:
             self._unsubscribe = None
         for plugin in self.plugins:
             plugin.stop()
-        loop, thread = self._loop, self._thread
-        if loop is not None and thread is not None and thread.is_alive():
-            loop.call_soon_threadsafe(loop.stop)
-            thread.join(5.0)
-        self._thread = None
+        self.stop_loop()
         self.workers.shutdown(wait=False, cancel_futures=True)
 
-    def _run(self) -> None:
-        loop = asyncio.new_event_loop()
-        asyncio.set_event_loop(loop)
-        self._loop = loop
-        try:
-            loop.run_until_complete(self._startup())
-        except Exception as exc:  # noqa: BLE001 - reported by start() in the caller's thread
-            self._start_error = exc
-            self._ready.set()
-            loop.run_until_complete(self._cleanup())
-            loop.close()
-            return
-        self._ready.set()
-        try:
-            loop.run_forever()
-        finally:
-            loop.run_until_complete(self._cleanup())
-            loop.close()
+    async def _make_app(self) -> web.Application:
+        self.hub = Hub(asyncio.get_running_loop())
+        return self.make_app()
 
-    async def _startup(self) -> None:
-        loop = asyncio.get_running_loop()
-        self.hub = Hub(loop)
-        app = self.make_app()
-        self._runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
-        await self._runner.setup()
-        try:
-            site = web.TCPSite(self._runner, self.host, self.requested_port)
-            await site.start()
-        except OSError as exc:
-            if not (self.port_fallback and exc.errno == errno.EADDRINUSE):
-                raise
-            log.warning("studio: port %d is in use; listening on a free port instead", self.requested_port)
-            site = web.TCPSite(self._runner, self.host, 0)
-            await site.start()
-        server = site._server  # noqa: SLF001 - aiohttp exposes the bound port only here
-        sockets = getattr(server, "sockets", None) or []
-        self.port = int(sockets[0].getsockname()[1]) if sockets else self.requested_port
+    async def _bound(self) -> None:
         assert self.gate is not None
         self.gate.port = self.port
         self.gate.cookie = f"vibsynth_studio_{self.port}"
 
-    async def _cleanup(self) -> None:
+    async def _closing(self) -> None:
         if self.hub is not None:
             await self.hub.close()
-        if self._runner is not None:
-            await self._runner.cleanup()
 
     # ------------------------------------------------------------------ the application
     def make_app(self) -> web.Application:
@@ -362,11 +301,6 @@ class StudioServer:
     def on_pages_changed(self, callback: Callable[[int], None]) -> None:
         """``callback(pages)`` whenever a page connects, leaves or changes the channel it watches (on the loop)."""
         self._on_pages_changed.append(callback)
-
-    def call_in_loop(self, callback: Callable[[], None]) -> None:
-        """Run ``callback`` on the studio's loop (from any thread)."""
-        if self._loop is not None and not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(callback)
 
     # ------------------------------------------------------------------ the WebSocket
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
