@@ -235,3 +235,36 @@ def test_the_input_picker_lists_the_jack_input_and_switches_to_it(page, served):
             lambda: abs(data(page, "follow-meter", "level-db") - (LOUD_DB + 3)) < 2.0, what="the new input's level"
         )
     assert served.osc.status()["follow.device"].startswith("system")
+
+
+def test_without_follow_the_panel_says_how_to_start_and_starts_the_picked_input(tmp_path):
+    from selenium.webdriver.support.ui import Select
+
+    require_jack()
+    require_browser()
+    served = start_serve(tmp_path / "serve", output="sounddevice", rate=FS, extra_config="knobs:\n  glide_ms: 0\n")
+    browser = chromium(1400, 1600)
+    try:
+        open_studio(browser, served)
+        hint = by_testid(browser, "follow-hint")
+        wait_for(lambda: "--follow" in hint.text, what="the hint")
+        assert by_testid(browser, "follow-gain").get_attribute("disabled") is not None
+        assert not browser.find_elements("css selector", '[data-testid="follow-toggle"]')
+        picker = by_testid(browser, "follow-input")
+        wait_for(lambda: len(picker.find_elements("css selector", "option")) > 1, what="the input devices")
+        before = jack_ports()
+        Select(picker).select_by_value("system")
+        wait_for(lambda: len(new_ports(before)) == 2, what="the input's JACK ports")
+        wait_for(
+            lambda: len(browser.find_elements("css selector", '[data-testid="follow-toggle"]')) == 2, what="routes"
+        )
+        assert hint.text == "" and by_testid(browser, "follow-gain").get_attribute("disabled") is None
+        with JackPlayer(n_ports=2, signal=step_signal()[int(QUIET_S * FS) :], name="follow-start") as player:
+            player.connect(new_ports(before))
+            player.play()
+            wait_for(lambda: abs(served.get("intensity", 1) - knob_of(LOUD_DB)) < 0.05, what="channel 1 following")
+        assert follow_get(served, "gain") == 0.0
+        assert console_errors(browser) == []
+    finally:
+        browser.quit()
+        served.stop()

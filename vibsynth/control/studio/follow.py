@@ -57,7 +57,7 @@ log = logging.getLogger(__name__)
 #: How often open pages get the follow state.
 PUSH_PERIOD_S = 0.1
 #: Trace pushed each time: the newest this many seconds (several pushes overlap: one coalesced away loses nothing).
-PUSH_TRACE_S = 1.0
+PUSH_TRACE_S = 0.5
 #: Changes a second the panel takes (burst as many); a slider sends at most ~20.
 CHANGE_RATE = 50.0
 #: Largest change request body (one key and a value).
