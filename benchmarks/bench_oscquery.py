@@ -11,8 +11,10 @@ in one asyncio loop of this process, each LISTENing to ``/vibsynth/ch/1/intensit
   send); the latency is when the *last* listener received the binary OSC message with ``v``
   (one clock: ``time.perf_counter`` of this process). It includes the OSC receive loop, the
   Controller's event, the push coalescing interval (5 ms) and the WebSocket.
-* **controller -> listener**: the same through ``Controller.set_knob`` (what the studio, MIDI,
-  clips and follow do).
+* **studio -> listener**: the same move sent as the studio page sends it (its WebSocket, with
+  the token), timestamped before the send.
+* **controller -> listener**: the same through ``Controller.set_knob`` (what MIDI, clips and
+  follow do).
 * **tree**: ``GET /`` (the whole tree with live values) size and time, 1 and 8 channels.
 
 Trials are 30 ms apart (no coalescing between them). Prints a table and writes JSON to
@@ -63,6 +65,7 @@ def start_service(channels: int) -> SimpleNamespace:
     from vibsynth.control.controller import Controller
     from vibsynth.control.osc import adapter as osc_adapter
     from vibsynth.control.oscquery import adapter as oscquery_adapter
+    from vibsynth.control.studio import adapter as studio_adapter
     from vibsynth.settings.config import load_config
 
     overrides = {"audio.backend": "null", "audio.channels": channels, "osc.port": 0}
@@ -75,14 +78,46 @@ def start_service(channels: int) -> SimpleNamespace:
     osc.start()
     query = oscquery_adapter.create(settings, SimpleNamespace(oscquery_port=0), controller, osc)
     query.start()
+    args = SimpleNamespace(no_studio=False, studio_port=0, studio_token=None)
+    studio = studio_adapter.create(settings, args, controller, None, servers=[osc])
+    studio.start()
     out.start()
-    return SimpleNamespace(engine=engine, controller=controller, output=out, osc=osc, query=query)
+    return SimpleNamespace(engine=engine, controller=controller, output=out, osc=osc, query=query, studio=studio)
 
 
 def stop_service(service: SimpleNamespace) -> None:
+    service.studio.stop()
     service.query.stop()
     service.osc.stop()
     service.output.stop()
+
+
+class StudioPage:
+    """A studio WebSocket (as the page's), on its own loop thread: moves the intensity knob."""
+
+    def __init__(self, studio: Any) -> None:
+        self.loop = asyncio.new_event_loop()
+        threading.Thread(target=self.loop.run_forever, daemon=True).start()
+        origin = f"http://127.0.0.1:{studio.port}"
+        headers = {"Authorization": f"Bearer {studio.token}", "Origin": origin}
+
+        async def open_() -> None:
+            self.session = aiohttp.ClientSession()
+            self.ws = await self.session.ws_connect(f"{origin}/ws", headers=headers)
+
+        asyncio.run_coroutine_threadsafe(open_(), self.loop).result(30)
+
+    def move(self, value: float) -> None:
+        message = json.dumps({"type": "knob", "channel": 1, "name": "intensity", "value": value})
+        asyncio.run_coroutine_threadsafe(self.ws.send_str(message), self.loop).result(5)
+
+    def close(self) -> None:
+        async def shut() -> None:
+            await self.ws.close()
+            await self.session.close()
+
+        asyncio.run_coroutine_threadsafe(shut(), self.loop).result(30)
+        self.loop.call_soon_threadsafe(self.loop.stop)
 
 
 class Listeners:
@@ -141,6 +176,7 @@ def latency(service: SimpleNamespace, clients: int, trials: int, via: str) -> di
     listeners = Listeners(service.query.server.port, clients)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     target = ("127.0.0.1", service.osc.port)
+    page = StudioPage(service.studio) if via == "studio" else None
     results, lost = [], 0
     try:
         time.sleep(0.3)
@@ -149,6 +185,8 @@ def latency(service: SimpleNamespace, clients: int, trials: int, via: str) -> di
             sent = time.perf_counter()
             if via == "osc":
                 sock.sendto(encode_message(ADDRESS, (value,), "f"), target)
+            elif page is not None:
+                page.move(value)
             else:
                 service.controller.set_knob("intensity", value, channels=(0,), source="studio")
             arrived = listeners.wait_all(value)
@@ -160,6 +198,8 @@ def latency(service: SimpleNamespace, clients: int, trials: int, via: str) -> di
     finally:
         sock.close()
         listeners.close()
+        if page is not None:
+            page.close()
     return {**_stats(results), "lost": lost, "clients": clients, "via": via}
 
 
@@ -187,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
             trees[f"{channels}ch"] = tree_cost(service)
             if channels == 1:
                 for clients in args.clients:
-                    for via in ("osc", "controller"):
+                    for via in ("osc", "studio", "controller"):
                         rows.append(latency(service, clients, args.trials, via))
         finally:
             stop_service(service)
