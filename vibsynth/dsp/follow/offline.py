@@ -181,10 +181,15 @@ def _run(
     frames = TrackFrames.concat(parts)
     t_end = frames.end_sample - total_pad - tracker.latency
     keep = (t_end > 0) & (t_end <= n)
-    onset = frames.onset_strength.copy()
-    # Onsets are seen sooner than the level (a 5 ms rise vs the level's window): one found in the
-    # signal before the first kept frame belongs to that frame.
-    early = (t_end <= 0) & (frames.end_sample > total_pad) & (onset > 0)
+    # Onsets are seen sooner than the level (within a hop of the rise, against the level's window
+    # and filter): each moves to the frame whose compensated time is about half a hop before its
+    # detection, and one before the first kept frame belongs to that frame.
+    shift = max(0, int(round((tracker.latency - 0.5 * tracker.hop) / tracker.hop)))
+    onset = np.zeros_like(frames.onset_strength)
+    if shift < onset.size:  # only onsets detected in the signal, not in the primer
+        in_signal = frames.end_sample > total_pad
+        onset[shift:] = np.where(in_signal, frames.onset_strength, 0.0)[: onset.size - shift]
+    early = (t_end <= 0) & (onset > 0)
     if early.any() and keep.any():
         first = int(np.argmax(keep))
         onset[first] = max(onset[first], float(onset[early].max()))
