@@ -249,3 +249,12 @@ def test_a_preset_file_added_on_disk_reaches_listeners_as_a_path_change(tmp_path
         srv.stop()
     assert changed == {"/vibsynth/preset"} | {f"/vibsynth/ch/{c}/preset" for c in range(1, 5)}
     assert status == 200 and "velvet-test" in node["RANGE"][0]["VALS"]
+
+
+def test_without_websocket_clients_a_read_sees_the_current_structure(server, presets, monkeypatch):
+    from vibsynth.control.oscquery import server as server_module
+
+    assert "velvet" not in get(server, "/vibsynth/preset?RANGE")[1]["RANGE"][0]["VALS"]
+    presets.list.append("velvet")
+    monkeypatch.setattr(server_module, "REFRESH_S", 0.0)  # the last comparison is older than the period
+    assert "velvet" in get(server, "/vibsynth/preset?RANGE")[1]["RANGE"][0]["VALS"]

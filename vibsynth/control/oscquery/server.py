@@ -30,6 +30,7 @@ import ipaddress
 import json
 import logging
 import threading
+import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -73,7 +74,8 @@ MAX_MESSAGE_BYTES = 16384
 PUSH_INTERVAL_S = 0.005
 #: Listened values without change events (sources, follow) are read this often.
 POLL_S = 0.05
-#: The tree's structure (preset and clip names, running parts) is compared this often.
+#: The tree's structure (preset and clip names, running parts) is compared this often while WebSocket
+#: clients are connected (otherwise when a request reads it, at most this often).
 REFRESH_S = 1.0
 #: JSON commands (LISTEN, IGNORE) and OSC packets one client may send per second (burst the same).
 CLIENT_RATE = 1000.0
@@ -216,6 +218,7 @@ class OscQueryServer(LoopServer):
         self._scheduled = False
         self._next_id = 0
         self._http = Throttle(rate=HTTP_RATE, burst=HTTP_RATE)
+        self._rebuilt_at = time.monotonic()
         self._tasks: list[asyncio.Task[None]] = []
         self._unsubscribe: Callable[[], None] | None = None
         self._last_polled: dict[str, bytes] = {}
@@ -332,6 +335,8 @@ class OscQueryServer(LoopServer):
             )
         if attribute == "HOST_INFO":
             return web.json_response(self.host_info(request))
+        if time.monotonic() - self._rebuilt_at > REFRESH_S:
+            await self._rebuild()  # nobody listening: the structure is compared when it is read
         node = self.tree.find(path)
         if node is None:
             self.count("unknown_path")
@@ -558,17 +563,22 @@ class OscQueryServer(LoopServer):
                 self._push(changed)
 
     async def _refresh(self) -> None:
-        """Compare the tree's structure every :data:`REFRESH_S`; tell the clients what changed."""
-        loop = asyncio.get_running_loop()
+        """Compare the tree's structure every :data:`REFRESH_S` while WebSocket clients are connected."""
         while True:
             await asyncio.sleep(REFRESH_S)
-            try:
-                events = await loop.run_in_executor(None, self.tree.refresh)
-            except VibsynthError as exc:
-                log.warning("OSCQuery: the tree could not be rebuilt: %s", exc)
-                continue
-            if events:
-                self.notify_structure(events)
+            if self.clients:
+                await self._rebuild()
+
+    async def _rebuild(self) -> None:
+        """Rebuild the tree's structure (on a worker thread); tell the clients what changed."""
+        self._rebuilt_at = time.monotonic()
+        try:
+            events = await asyncio.get_running_loop().run_in_executor(None, self.tree.refresh)
+        except VibsynthError as exc:
+            log.warning("OSCQuery: the tree could not be rebuilt: %s", exc)
+            return
+        if events:
+            self.notify_structure(events)
 
     def notify_structure(self, events: list[tuple[str, str]]) -> None:
         """Send ``PATH_ADDED`` / ``PATH_REMOVED`` / ``PATH_CHANGED`` to every client (on the loop)."""
