@@ -49,6 +49,7 @@ class OscQueryService:
     def __init__(self, server: OscQueryServer, advertiser: Advertiser | None) -> None:
         self.server = server
         self.advertiser = advertiser
+        self._previous_status: Callable[[], list[tuple[str, object]]] | None = None
 
     @property
     def tree(self) -> Tree:
@@ -56,6 +57,11 @@ class OscQueryService:
 
     def start(self) -> None:
         self.server.start()
+        handler = self.server.handler
+        previous = handler.extra_status
+        self._previous_status = previous
+        # the OSC server's /status (and so the studio's status panel, vibsynth status) shows these too
+        handler.extra_status = lambda: [*(previous() if previous is not None else []), *self.status_pairs()]
         if self.advertiser is not None:
             self.advertiser.oscquery_port = self.server.port
             self.advertiser.start()
@@ -63,6 +69,7 @@ class OscQueryService:
     def stop(self) -> None:
         if self.advertiser is not None:
             self.advertiser.stop()
+        self.server.handler.extra_status = self._previous_status
         self.server.stop()
 
     def describe(self) -> str:

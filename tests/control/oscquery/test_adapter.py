@@ -1,0 +1,52 @@
+"""OSCQuery for serve: built from the discovery: section for a running OSC server, its counters in /status."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+from tests.control.osc.fakes import make_controller
+from vibsynth.control.osc.server import OscServer
+from vibsynth.control.oscquery import adapter
+from vibsynth.settings.config import load_config
+
+
+def settings(**overrides):
+    return load_config(overrides={"osc.port": 0, **overrides}, env={}, user_file=False).settings
+
+
+@pytest.fixture
+def osc():
+    ctl = make_controller(channels=2)
+    server = OscServer(ctl, port=0)
+    server.start()
+    yield server
+    server.stop()
+
+
+def test_serve_builds_it_for_the_osc_server_and_status_shows_its_counters(osc):
+    service = adapter.create(settings(), SimpleNamespace(oscquery_port=0), osc.controller, osc)
+    assert service is not None and service.advertiser is None  # loopback only: not advertised
+    service.start()
+    try:
+        info = service.server.host_info()
+        assert info["OSC_PORT"] == osc.port and info["OSC_IP"] == "127.0.0.1"
+        assert "/vibsynth/ch/2/intensity" in service.tree.methods
+        keys = dict(osc.handler.status_pairs())
+        assert keys["oscquery_clients"] == 0 and keys["oscquery_refused"] == 0
+        assert service.describe().startswith(f"OSCQuery on http://127.0.0.1:{service.server.port}/")
+    finally:
+        service.stop()
+    assert "oscquery_clients" not in dict(osc.handler.status_pairs())
+
+
+def test_off_switches_and_explicit_interfaces(osc):
+    assert adapter.create(settings(), SimpleNamespace(no_discovery=True), osc.controller, osc) is None
+    assert adapter.create(settings(**{"discovery.enabled": False}), None, osc.controller, osc) is None
+    assert adapter.create(settings(), None, osc.controller, None) is None  # no OSC server: nothing to describe
+    chosen = settings(**{"discovery.interfaces": ["10.0.0.7"], "discovery.name": "bench rig"})
+    service = adapter.create(chosen, None, osc.controller, osc)
+    assert service is not None and service.advertiser is not None  # built, not started: no multicast here
+    assert service.advertiser.addresses == ["10.0.0.7"] and service.advertiser.name == "bench rig"
+    assert service.advertiser.osc_port == osc.port
