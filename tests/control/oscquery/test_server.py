@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import time
 import urllib.error
 import urllib.request
 from typing import Any
@@ -258,3 +259,31 @@ def test_without_websocket_clients_a_read_sees_the_current_structure(server, pre
     presets.list.append("velvet")
     monkeypatch.setattr(server_module, "REFRESH_S", 0.0)  # the last comparison is older than the period
     assert "velvet" in get(server, "/vibsynth/preset?RANGE")[1]["RANGE"][0]["VALS"]
+
+
+def test_a_malformed_websocket_frame_closes_that_socket_only_and_is_counted(server, ctl):
+    import base64
+    import os
+    import socket
+
+    sock = socket.create_connection(("127.0.0.1", server.port), timeout=5)
+    try:
+        key = base64.b64encode(os.urandom(16)).decode()
+        sock.sendall(
+            (
+                f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n"
+            ).encode()
+        )
+        assert b" 101 " in sock.recv(4096).split(b"\r\n", 1)[0]
+        sock.sendall(bytes([0x83, 0x85]) + b"\x00\x00\x00\x00" + b"hello")  # reserved opcode 3
+        data = sock.recv(4096)  # the server's close frame (1002), then the end of the stream
+        assert data[:1] == b"\x88"
+    finally:
+        sock.close()
+    for _ in range(50):
+        if server.refused().get("malformed"):
+            break
+        time.sleep(0.02)
+    assert server.refused()["malformed"] == 1 and not server.clients
+    assert get(server, "/vibsynth/ch/1/intensity?VALUE") == (200, {"VALUE": [0.0]})
