@@ -215,6 +215,17 @@ def _oscquery(settings: VibsynthConfig, args: Any, controller: Controller, libra
     return service
 
 
+def _vrchat(settings: VibsynthConfig, args: Any, controller: Controller, servers: list[Any], oscquery: Any) -> None:
+    """Start the VRChat bridge (``vrchat:``) on the running OSC server (and its OSCQuery tree) when it is on."""
+    from vibsynth.control.vrchat import adapter
+
+    osc = next((s for s in servers if getattr(s, "name", "") == "osc"), None)
+    bridge = adapter.create(settings, args, controller, osc, oscquery)
+    if bridge is not None:
+        bridge.start()
+        servers.append(bridge)
+
+
 def _announce_studio(studio: Any, args: Any, out: Any) -> None:
     """Print the studio's URL line (with its token); ``vibsynth studio`` also opens a browser."""
     from vibsynth.control.studio.adapter import open_in_browser
@@ -321,6 +332,7 @@ def _serve(settings: VibsynthConfig, args: Any, stop: threading.Event, owns_proc
                 servers.append(server)
         _follow(settings, controller, servers)
         oscquery = _oscquery(settings, args, controller, library, servers)
+        _vrchat(settings, args, controller, servers, oscquery)
         studio = _studio(settings, args, controller, library, servers)
         if library is not None and watcher_cls is not None and settings.presets.watch:
             watcher = watcher_cls(library, on_change=lambda name: controller.reapply_preset(name), interval_s=0.5)

@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
+from typing import Protocol
 
 from vibsynth.control.clips.status import clip_status
 from vibsynth.control.controller import Controller, KnobEvent, check_range
@@ -78,6 +79,23 @@ class OscStats:
     error_replies_suppressed: int = 0
     replies_truncated: int = 0  # error replies cut to the UDP reply budget
     replies_dropped: int = 0  # replies not sent: over the UDP reply budget
+
+
+class NamespaceTable(Protocol):
+    """Every address under a root outside the prefix (VRChat's ``/avatar/``): :meth:`OscHandler.register_namespace`."""
+
+    def take_packet(self, data: bytes) -> bool:
+        """A datagram under the root, before it is decoded: True when it is done with (e.g. counted and
+        dropped); False to have it decoded and handed to :meth:`handle` (the table counts its own problems)."""
+        ...
+
+    def handle(self, msg: Message, peer: PeerLike, at_frame: int | None) -> None:
+        """One decoded message under the root (no error reply: the table counts what it refuses)."""
+        ...
+
+    def status_pairs(self) -> list[tuple[str, object]]:
+        """The table's ``/status.reply`` pairs."""
+        ...
 
 
 class _TokenBucket:
@@ -177,6 +195,7 @@ class OscHandler:
             "monitor": self._on_monitor,
         }
         self._getters: dict[str, Getter] = {}  # get NAME answered by a registered table (see register)
+        self._namespaces: tuple[tuple[str, bytes, NamespaceTable], ...] = ()  # see register_namespace
         # balance set by anything but /speed: the base that the speed shift is added to
         self._base_balance = [s.balance for s in controller.state()]
         # coalescing of immediate knob moves within one receive batch (see handle_batch)
@@ -204,6 +223,25 @@ class OscHandler:
         self._methods.update(methods)
         self._getters.update(getters)
 
+    def register_namespace(self, root: str, table: NamespaceTable) -> None:
+        """Hand every address under ``root`` (``/avatar/``, outside the prefix) to ``table``.
+
+        A datagram under it goes to ``table.take_packet`` before it is decoded, so a flood the table
+        does not want (VRChat's unmapped avatar parameters) costs a prefix test and what the table
+        does; otherwise it is decoded and each message goes to ``table.handle``, with no error reply.
+
+        Raises
+        ------
+        ParameterError
+            A root that is not ``/.../`` or lies under the prefix or another root.
+        """
+        if not (root.startswith("/") and root.endswith("/") and len(root) > 2):
+            raise ParameterError(f"namespace root {root!r} must look like /name/")
+        taken = [r for r, _, _ in self._namespaces] + ([self.prefix + "/"] if self.prefix else [])
+        if not self.prefix or any(root.startswith(r) or r.startswith(root) for r in taken):
+            raise ParameterError(f"namespace root {root!r} overlaps the OSC address space")
+        self._namespaces += ((root, root.encode(), table),)
+
     def method_names(self) -> frozenset[str]:
         """The methods this handler answers (its own and the registered tables'): what discovery lists."""
         return frozenset(self._methods)
@@ -225,6 +263,9 @@ class OscHandler:
         Replies to a UDP peer on another host total at most :data:`REPLY_AMPLIFICATION` x
         ``len(data)`` bytes (see :class:`ReplyBudget`).
         """
+        for _, raw, table in self._namespaces:
+            if data.startswith(raw) and table.take_packet(data):
+                return
         peer = self._limit_replies(peer, len(data))
         try:
             packet = decode_packet(data)
@@ -284,6 +325,12 @@ class OscHandler:
     def handle_message(self, msg: Message, peer: PeerLike, at_frame: int | None = None) -> None:
         """Route one decoded message (to every method its address pattern matches)."""
         self.stats.messages += 1
+        for root, _, table in self._namespaces:
+            if msg.address.startswith(root):
+                if self._pending:
+                    self.flush()
+                table.handle(msg, peer, at_frame)
+                return
         if isinstance(peer, ReplyBudget):
             peer.request = msg.address
         if self.tap.active:
@@ -535,6 +582,8 @@ class OscHandler:
         if self.extra_status is not None:
             pairs.extend(self.extra_status())
         pairs += [("replies_truncated", self.stats.replies_truncated), ("replies_dropped", self.stats.replies_dropped)]
+        for _, _, table in self._namespaces:
+            pairs += table.status_pairs()
         return pairs + channel_status(ctl) + clip_status(ctl) + follow_status(ctl, fit_osc_string)
 
     def _on_status(self, msg: Message, channels, peer, at_frame) -> None:
