@@ -20,6 +20,7 @@ __all__ = [
     "CLIP_RATE_MIN",
     "CLIP_RATE_MAX",
     "CLIP_LOOPS_MAX",
+    "ACTUATOR_BOOST_MAX_DB",
 ]
 
 #: Output channels the engine renders (``MAXCH`` in ``engine/_core.c``): ``audio.channels``.
@@ -41,3 +42,6 @@ GLIDE_MAX_MS = 10_000
 CLIP_GAIN_MAX = 4.0
 CLIP_RATE_MIN, CLIP_RATE_MAX = 0.05, 20.0
 CLIP_LOOPS_MAX = 10_000
+#: Largest boost the actuator compensation may be allowed (``actuator.max_boost_db``), in dB above
+#: the response's level in the intensity band: a measured voice coil is ~30 dB down at 10 Hz.
+ACTUATOR_BOOST_MAX_DB = 60.0

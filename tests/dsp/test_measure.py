@@ -120,6 +120,7 @@ def test_snr_follows_the_noise_and_repeatability_sees_a_burst():
     quiet = measure_recording(record(plan, b, a, delay=10, noise=1e-5, seed=2), plan)
     loud = measure_recording(record(plan, b, a, delay=10, noise=1e-3, seed=2), plan)
     assert np.median(quiet.snr_db - loud.snr_db) == pytest.approx(40.0, abs=1.5)
+    plan = SweepPlan(fs=FS, seconds=2.0, n_sweeps=2)
     y = record(plan, b, a, delay=10, noise=1e-5, seed=3)
     start = plan.starts()[1] + plan.sweep_samples // 2
     y[start : start + 9600] += 0.3 * np.random.default_rng(4).standard_normal(9600)  # a knock mid-sweep
@@ -151,3 +152,26 @@ def test_plan_and_recording_checked():
     bad[5] = np.nan
     with pytest.raises(ParameterError, match="NaN"):
         measure_recording(bad, plan)
+
+
+def test_three_sweeps_outvote_a_knocked_one():
+    plan = SweepPlan(fs=FS, seconds=2.0, n_sweeps=3)
+    b, a = resonance()
+    y = record(plan, b, a, delay=10, noise=1e-5, seed=5)
+    start = plan.starts()[1] + plan.sweep_samples // 2
+    y[start : start + 9600] += 0.3 * np.random.default_rng(6).standard_normal(9600)
+    m = measure_recording(y, plan)
+    sel = (m.freqs >= 20) & (m.freqs <= 800)
+    assert np.max(np.abs(m.response_db - truth_db(b, a, m.freqs))[sel]) < 0.1
+    assert m.repeatability_db < 0.1
+    assert np.max(np.abs(m.sweeps_db[1] - m.response_db)[sel]) > 0.5  # the knocked sweep itself is off
+
+
+def test_majority_spread_and_combination():
+    from vibsynth.dsp.measure import combine_sweeps_db, majority_spread_db
+
+    v = np.array([[0.0], [0.2], [5.0]])
+    assert majority_spread_db(v)[0] == pytest.approx(0.2)
+    assert combine_sweeps_db(v)[0] == pytest.approx(0.2)
+    assert majority_spread_db(v[:2])[0] == pytest.approx(0.2)
+    assert combine_sweeps_db(np.array([[0.0], [10 * np.log10(3)]]))[0] == pytest.approx(10 * np.log10(2))

@@ -55,6 +55,8 @@ __all__ = [
     "clipped_samples",
     "spectrum_db",
     "smooth_db",
+    "combine_sweeps_db",
+    "majority_spread_db",
     "band_response_db",
     "measure_recording",
 ]
@@ -285,6 +287,47 @@ def smooth_db(values_db: ArrayLike) -> NDArray[np.float64]:
     return np.asarray(10.0 * np.log10(np.mean(10.0 ** (v / 10.0), axis=0)), dtype=np.float64)
 
 
+def combine_sweeps_db(sweeps_db: ArrayLike) -> NDArray[np.float64]:
+    """The response of several sweeps: their power mean for 1-2 sweeps, the median from 3 on.
+
+    From three sweeps on, one sweep hit by a knock, a noise burst or a dropped block is
+    outvoted at every frequency instead of pulling the mean.
+
+    Parameters
+    ----------
+    sweeps_db : array_like, shape (n_sweeps, n)
+
+    Returns
+    -------
+    response_db : ndarray, shape (n,)
+    """
+    v = np.asarray(sweeps_db, dtype=np.float64)
+    if v.shape[0] >= 3:
+        return np.asarray(np.median(v, axis=0), dtype=np.float64)
+    return smooth_db(v)
+
+
+def majority_spread_db(sweeps_db: ArrayLike) -> NDArray[np.float64]:
+    """How far the sweeps that make the response agree, per frequency (dB).
+
+    With ``n`` sweeps: the narrowest range holding ``n // 2 + 1`` of them (all of them for
+    1-2 sweeps; two of three; three of four or five), so an outvoted sweep does not count.
+
+    Parameters
+    ----------
+    sweeps_db : array_like, shape (n_sweeps, n)
+
+    Returns
+    -------
+    spread_db : ndarray, shape (n,)
+    """
+    v = np.sort(np.asarray(sweeps_db, dtype=np.float64), axis=0)
+    n = v.shape[0]
+    k = n if n <= 2 else n // 2 + 1
+    ranges = [v[i + k - 1] - v[i] for i in range(n - k + 1)]
+    return np.asarray(np.min(np.stack(ranges), axis=0), dtype=np.float64)
+
+
 def band_response_db(
     freqs: ArrayLike, level_db: ArrayLike, *, centres: ArrayLike = BAND_CENTRES_HZ
 ) -> NDArray[np.float64]:
@@ -384,8 +427,8 @@ class Measurement:
     freqs : ndarray, shape (n,)
         The fine grid (Hz).
     response_db : ndarray, shape (n,)
-        Recorded level per unit of drive (dB; 0 dB = the input reads what the output sent),
-        power mean of the sweeps.
+        Recorded level per unit of drive (dB; 0 dB = the input reads what the output sent):
+        :func:`combine_sweeps_db` of the sweeps.
     sweeps_db : ndarray, shape (n_sweeps, n)
         Each sweep's response.
     noise_db : ndarray, shape (n,)
@@ -405,7 +448,7 @@ class Measurement:
     clipped : int
         Samples at or above :data:`CLIP_LEVEL`.
     repeatability_db : float
-        Largest difference of a sweep from the mean where the SNR is at least ``min_snr_db``.
+        Largest :func:`majority_spread_db` where the SNR is at least ``min_snr_db``.
     """
 
     freqs: NDArray[np.float64]
@@ -504,7 +547,7 @@ def measure_recording(
         taken = np.roll(ir, pre - lag)[: win_n + pre] * window
         rows.append(spectrum_db(taken, fs, f))
     sweeps_db = np.stack(rows)
-    response_db = smooth_db(sweeps_db)
+    response_db = combine_sweeps_db(sweeps_db)
     # The lead silence, shifted as a sweep's recording would be, through the same path.
     quiet = y[: min(plan.lead, seg)]
     noise_ir = deconvolve(quiet, sweep, fs, plan.f1, plan.f2)
@@ -514,8 +557,7 @@ def measure_recording(
     noise_db = spectrum_db(noise_taken, fs, f) + scale_db
     snr_db = response_db - noise_db
     good = snr_db >= min_snr_db
-    spread = np.abs(sweeps_db - response_db[np.newaxis, :])
-    repeat = float(np.max(spread[:, good])) if np.any(good) else math.inf
+    repeat = float(np.max(majority_spread_db(sweeps_db)[good])) if np.any(good) else math.inf
     first_sweep = y[plan.lead + lag : plan.lead + lag + plan.sweep_samples]
     return Measurement(
         freqs=f,

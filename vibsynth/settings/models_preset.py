@@ -128,3 +128,24 @@ class ActuatorProfileModel(SettingsModel):
         "[[Hz, dB], ...]: the actuator's response, interpolated on log-frequency",
         allowed=RESPONSE_POINTS.allowed(),
     )
+    absolute: bool = setting(
+        False,
+        "true for a measured profile: response = recorded level per unit of drive through one sensor chain "
+        "(devices measured with one sensor compare); false: a shape, 0 dB somewhere",
+    )
+    rate: Annotated[int, Field(ge=1000, le=384000)] | None = setting(
+        None, "sample rate the response was measured at (null: not measured)", unit="Hz"
+    )
+    weighting: Annotated[list[ResponsePoint] | None, BeforeValidator(RESPONSE_POINTS.check)] = setting(
+        None,
+        "[[Hz, dB], ...]: the sensitivity weighting (response - iso-intensity curve, 0 dB at its top), or null",
+        allowed=RESPONSE_POINTS.allowed(nullable=True),
+    )
+    band_hz: Annotated[list[Annotated[float, Field(gt=0, le=20000)]], Field(min_length=2, max_length=2)] | None = (
+        setting(None, "[low, high]: the device's own intensity band; null = the paper's 80-200 Hz", unit="Hz")
+    )
+    provenance: dict[str, Any] | None = setting(
+        None,
+        "how it was measured: date, devices, channel, level, SNR, latency, sweeps, repeatability",
+        allowed="a mapping",
+    )

@@ -1,0 +1,240 @@
+"""``vibsynth calibrate response`` on the JACK dummy server, through a simulated actuator.
+
+The simulated actuator is a JACK client of this test process: its input is fed by the
+measuring process' ``PortAudio:out_N``, its output feeds one ``PortAudio:in_K``; in between,
+a numpy/scipy process callback applies a known response (a voice coil's 2nd-order
+resonance, like the paper's HapCoil-One at 65 Hz, an overall sensitivity) and adds seeded
+noise. The measuring command runs in a child process (its own GIL; this client's Python
+callback never delays its streams).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from scipy import signal
+
+from tests.e2e.jackutil import require_jack
+
+pytestmark = pytest.mark.e2e
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def resonance_sos(f0: float, q: float, gain_db: float, fs: float) -> np.ndarray:
+    """A voice coil's acceleration per volt: a resonant 2nd-order high-pass (RBJ), times a sensitivity."""
+    w0 = 2 * np.pi * f0 / fs
+    alpha = np.sin(w0) / (2 * q)
+    c = np.cos(w0)
+    b = np.array([(1 + c) / 2, -(1 + c), (1 + c) / 2]) * 10 ** (gain_db / 20)
+    a = np.array([1 + alpha, -2 * c, 1 - alpha])
+    return np.concatenate([b / a[0], a / a[0]])[np.newaxis, :]
+
+
+def response_db(sos: np.ndarray, freqs: np.ndarray, fs: float) -> np.ndarray:
+    _, h = signal.sosfreqz(sos, worN=freqs, fs=fs)
+    return 20 * np.log10(np.abs(h))
+
+
+def run_simulated_actuator(name: str, sos: np.ndarray, noise_rms: float, seed: int) -> None:
+    """The simulated actuator's process: a JACK client ``name`` (``in`` -> response + noise -> ``out``).
+
+    Its main thread only waits on stdin (no other Python thread may hold the GIL the real-time
+    process callback needs); when stdin closes it prints the JACK cycles it missed and exits.
+    """
+    import jack
+
+    client = jack.Client(name, no_start_server=True, servername=os.environ.get("JACK_DEFAULT_SERVER"))
+    inport = client.inports.register("in")
+    outport = client.outports.register("out")
+    zi = np.zeros((sos.shape[0], 2))
+    noise = (noise_rms * np.random.default_rng(seed).standard_normal(1 << 18)).astype(np.float32)
+    state = {"pos": 0, "gaps": 0, "next": None}
+
+    def process(frames: int) -> None:
+        nonlocal zi
+        now = client.last_frame_time
+        if state["next"] is not None and now != state["next"]:
+            state["gaps"] += 1  # a cycle this Python client missed: a hole in the instrument
+        state["next"] = now + frames
+        y, zi = signal.sosfilt(sos, inport.get_array(), zi=zi)
+        pos = state["pos"]
+        if pos + frames > noise.size:
+            pos = 0
+        outport.get_array()[:] = y + noise[pos : pos + frames]
+        state["pos"] = pos + frames
+
+    client.set_process_callback(process)
+    client.activate()
+    print("ready", flush=True)
+    sys.stdin.read()
+    client.deactivate()
+    client.close()
+    print(f"gaps {state['gaps']}", flush=True)
+
+
+class SimulatedActuator:
+    """A simulated actuator in its own process, patched between the measuring process' ports.
+
+    ``PortAudio:out_<channel>`` -> the actuator -> the ``input_index``-th PortAudio input port,
+    connected by a patch-bay client of this process as soon as the ports appear.
+    """
+
+    _count = 0
+
+    def __init__(self, sos: np.ndarray, *, noise_rms: float, seed: int, channel: int = 1, input_index: int = 1) -> None:
+        import jack
+
+        SimulatedActuator._count += 1
+        self.name = f"sim-actuator-{os.getpid()}-{SimulatedActuator._count}"
+        self.fs = 48000.0
+        args = [self.name, ",".join(repr(float(v)) for v in sos.ravel()), repr(noise_rms), str(seed)]
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "tests.e2e.test_calibrate_e2e", *args],
+            cwd=REPO,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert self.proc.stdout is not None and self.proc.stdout.readline().strip() == "ready"
+        self.gaps = 0
+        self.patch = jack.Client(
+            f"{self.name}-patch", no_start_server=True, servername=os.environ.get("JACK_DEFAULT_SERVER")
+        )
+        self.fs = float(self.patch.samplerate)
+        self.channel, self.input_index = channel, input_index
+        self._stop = threading.Event()
+        self._watch = threading.Thread(target=self._connect_loop, daemon=True)
+        self._watch.start()
+
+    def _connect_loop(self) -> None:
+        connected = None
+        client = self.patch
+
+        def order(name: str) -> tuple[int, str]:
+            return (len(name), name)  # out_2 before out_10
+
+        while not self._stop.is_set():
+            try:
+                outs = sorted((p.name for p in client.get_ports("PortAudio", is_audio=True, is_output=True)), key=order)
+                ins = sorted((p.name for p in client.get_ports("PortAudio", is_audio=True, is_input=True)), key=order)
+                want = None
+                if len(outs) >= self.channel and len(ins) >= self.input_index:
+                    want = (outs[self.channel - 1], ins[self.input_index - 1])
+                if want is not None and want != connected:
+                    client.connect(want[0], f"{self.name}:in")
+                    client.connect(f"{self.name}:out", want[1])
+                connected = want
+            except Exception:  # noqa: BLE001 - ports vanish while the child exits
+                connected = None
+            time.sleep(0.005)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._watch.join(timeout=2)
+        self.patch.close()
+        out, _ = self.proc.communicate(timeout=10)
+        self.gaps = int(out.split()[-1]) if out.strip() else -1
+
+
+def calibrate(tmp_path: Path, *extra: str, name: str = "sim") -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ, XDG_CONFIG_HOME=str(tmp_path / "config"), HOME=str(tmp_path))
+    cmd = [
+        sys.executable, "-m", "vibsynth", "calibrate", "response", "--input", "system:1",
+        "--set", "audio.host_api=JACK", "-o", str(tmp_path / f"{name}.yaml"), *extra,
+    ]  # fmt: skip
+    if "--channels" not in extra and "--channel" not in extra:
+        cmd += ["--channel", "1"]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=REPO)
+
+
+def read_profile(path: Path) -> tuple[np.ndarray, np.ndarray, dict]:
+    doc = yaml.safe_load(path.read_text())
+    pts = np.array(doc["response"])
+    return pts[:, 0], pts[:, 1], doc
+
+
+def fine_response(freqs_pts: np.ndarray, db_pts: np.ndarray, freqs: np.ndarray) -> np.ndarray:
+    return np.interp(np.log(freqs), np.log(freqs_pts), db_pts)
+
+
+@pytest.fixture
+def jack_ready() -> None:
+    require_jack()
+
+
+def test_simulated_actuator_measured_within_1_db_and_runs_agree(jack_ready, tmp_path):
+    sos = resonance_sos(65.0, 3.0, -6.0, 48000.0)
+    sim = SimulatedActuator(sos, noise_rms=1e-4, seed=1)
+    try:
+        runs = []
+        for k in range(3):
+            proc = calibrate(tmp_path, "--seconds", "2", "--sweeps", "3", name=f"run{k}")
+            assert proc.returncode == 0, proc.stderr
+            runs.append(read_profile(tmp_path / f"run{k}.yaml"))
+    finally:
+        sim.close()
+    print(f"simulated actuator missed {sim.gaps} JACK cycles")
+    f = np.geomspace(20, 800, 200)
+    truth = response_db(sos, f, sim.fs)
+    measured = np.stack([fine_response(p[0], p[1], f) for p in runs])
+    err = measured - truth
+    print(f"max |error| 20-800 Hz per run: {np.abs(err).max(axis=1).round(3)} dB")
+    print(f"at {f[np.abs(err).argmax(axis=1)].round(0)} Hz")
+    apart = np.abs(measured - measured.mean(axis=0)).max()
+    print(f"largest distance of a run from the three runs' mean: {apart:.3f} dB")
+    assert np.abs(err).max() <= 1.0
+    assert apart <= 0.3
+    doc = runs[0][2]
+    prov = doc["provenance"]
+    assert doc["absolute"] is True and doc["rate"] == 48000 and prov["rate_hz"] == 48000
+    assert prov["snr_db_min"] > 40 and prov["repeatability_db"] < 0.3
+    assert 0 <= prov["latency_ms"] < 50
+    assert len(prov["bands_db"]) == 30 and prov["input_channel"] == 1 and prov["output_channel"] == 1
+    lo, hi = doc["band_hz"]
+    assert 40 < lo < hi < 400
+
+
+@pytest.mark.parametrize(
+    ("case", "gain_db", "noise", "input_index", "message"),
+    [
+        ("no signal", None, 0.0, 1, "no signal on input"),
+        ("clipping", 30.0, 1e-4, 1, "clipped during the sweep"),
+        ("wrong channel", -6.0, 1e-4, 2, "came back on input channel 2"),
+        ("noise", -30.0, 0.2, 1, "background noise"),
+    ],
+)
+def test_bad_input_one_message_and_no_profile_changed(jack_ready, tmp_path, case, gain_db, noise, input_index, message):
+    existing = tmp_path / "sim.yaml"
+    existing.write_text("name: sim\nresponse: [[10, 0.0], [1000, 0.0]]\n")
+    before = existing.read_bytes()
+    sim = None
+    if gain_db is not None:
+        sim = SimulatedActuator(
+            resonance_sos(65.0, 3.0, gain_db, 48000.0), noise_rms=noise, seed=2, input_index=input_index
+        )
+    try:
+        proc = calibrate(tmp_path, "--seconds", "1", "--sweeps", "1")
+    finally:
+        if sim is not None:
+            sim.close()
+    assert proc.returncode != 0
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("vibsynth: error:")]
+    assert len(errors) == 1 and message in errors[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert existing.read_bytes() == before
+
+
+if __name__ == "__main__":  # the simulated actuator's process (see SimulatedActuator)
+    _name, _sos, _noise, _seed = sys.argv[1:5]
+    run_simulated_actuator(
+        _name, np.array([float(v) for v in _sos.split(",")]).reshape(-1, 6), float(_noise), int(_seed)
+    )
