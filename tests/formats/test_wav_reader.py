@@ -104,3 +104,16 @@ def test_rf64_takes_its_sizes_from_the_ds64_chunk(tmp_path):
     with WavReader(path) as r:
         assert r.frames == 100 and r.sample_format == "float32"
         assert np.array_equal(r.read(1000)[:, 0], x.astype(np.float64))
+
+
+def test_an_rf64_header_claiming_terabytes_is_one_line(tmp_path):
+    fmt = struct.pack("<HHIIHH", 1, 8, 192000, 192000 * 16, 16, 16)
+    ds64 = b"ds64" + struct.pack("<IQQQI", 28, 0, 2 * 10**12, 10**11, 0)
+    body = b"WAVE" + ds64 + b"fmt " + struct.pack("<I", 16) + fmt + b"data" + struct.pack("<I", 0xFFFFFFFF)
+    path = tmp_path / "huge.wav"
+    path.write_bytes(b"RF64" + struct.pack("<I", 0xFFFFFFFF) + body + b"\0" * 64)
+    with pytest.raises(InputError) as info:
+        WavReader(path)
+    assert str(info.value) == (
+        f"{path}: the header claims 2.0 TB of samples (651,042 s) but the file holds 64 bytes: truncated or corrupt"
+    )
