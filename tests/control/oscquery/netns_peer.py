@@ -39,10 +39,12 @@ def main(folder: str) -> None:
             if line.startswith("oscquery: "):
                 out["banner"] = line.strip()
                 break
-        time.sleep(2.0)  # mDNS probing and announcing
         browser = OSCQueryBrowser()
-        time.sleep(2.0)
-        service = browser.find_service_by_name(NAME)
+        service, deadline = None, time.monotonic() + 20.0
+        while service is None and time.monotonic() < deadline:  # mDNS probing and announcing take a while
+            time.sleep(0.5)
+            service = browser.find_service_by_name(NAME)
+        assert service is not None, "python-oscquery found no service in 20 s"
         client = OSCQueryClient(service)
         info = client.get_host_info()
         out["host_info"] = {"name": info.name, "osc_ip": info.osc_ip, "osc_port": info.osc_port}
@@ -59,11 +61,11 @@ def main(folder: str) -> None:
         }
         out["raw"] = client.last_json
         osc.close()
-        found = vibsynth.Client.discover("netns", interfaces=["127.0.0.1"], seconds=1.5)
+        found = vibsynth.Client.discover("netns", interfaces=["127.0.0.1"], seconds=3.0)
         out["client_discover"] = found.get("intensity")
         found.close()
         listing = subprocess.run(
-            [sys.executable, "-m", "vibsynth", "discover", "--seconds", "1.5", "--json"],
+            [sys.executable, "-m", "vibsynth", "discover", "--seconds", "3", "--json"],
             capture_output=True,
             text=True,
             check=True,
