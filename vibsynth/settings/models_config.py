@@ -15,7 +15,7 @@ from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, Val
 from pydantic_core import PydanticCustomError
 
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
-from vibsynth.limits import ACTUATOR_BOOST_MAX_DB, GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
+from vibsynth.limits import GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
 from vibsynth.settings.models_discovery import Discovery
@@ -24,6 +24,7 @@ from vibsynth.settings.models_lab import Lab
 from vibsynth.settings.models_midi_clips import MidiClips
 from vibsynth.settings.models_sources import Sources, knob_conflict
 from vibsynth.settings.models_studio import Studio
+from vibsynth.settings.models_vrchat import Vrchat, target_of
 from vibsynth.settings.values import (
     BINDABLE_CC_MAX,
     CC_MAX,
@@ -180,13 +181,7 @@ class Actuator(Section):
         "explicit points [[Hz, dB], ...], interpolated on log-frequency; overrides profile",
         allowed=RESPONSE_POINTS.allowed(nullable=True),
     )
-    max_boost_db: float = setting(
-        12.0,
-        "the inverse-EQ never boosts more than this above the response's level in the intensity band",
-        unit="dB",
-        ge=0,
-        le=ACTUATOR_BOOST_MAX_DB,
-    )
+    max_boost_db: float = setting(12.0, "the inverse-EQ never boosts more than this", unit="dB", ge=0, le=40)
 
 
 class Osc(Section):
@@ -435,6 +430,9 @@ class VibsynthConfig(SettingsModel):
     discovery: Discovery = Field(
         default_factory=Discovery, description="OSCQuery and mDNS advertising of the OSC server (docs/osc.md)"
     )
+    vrchat: Vrchat = Field(
+        default_factory=Vrchat, description="VRChat avatar parameters driving sources, channels, clips (docs/vr.md)"
+    )
 
     @model_validator(mode="after")
     def _cross_check(self, info: ValidationInfo) -> VibsynthConfig:
@@ -503,6 +501,21 @@ class VibsynthConfig(SettingsModel):
                     f"(allowed: 1..{channels})",
                     "follow.routes",
                     "audio.channels",
+                )
+        for i, param in enumerate(self.vrchat.parameters):
+            if param.channel is not None and param.channel > channels:
+                raise cross_problem(
+                    f"vrchat.parameters[{i}].channel = {param.channel}: but audio.channels = {channels} "
+                    f"(allowed: 1..{channels})",
+                    "vrchat.parameters",
+                    "audio.channels",
+                )
+            if self.vrchat.enabled and target_of(param) == "source" and self.layout is None:
+                raise cross_problem(
+                    f"vrchat.parameters[{i}] drives source {param.source}: sources need a layout "
+                    "(allowed: set layout, e.g. layout: vest-front)",
+                    "vrchat.parameters",
+                    "layout",
                 )
         spatial_error = inline_layout_problem(self) or knob_conflict(self.sources, self.midi.mapping)
         if spatial_error is not None:
