@@ -15,7 +15,7 @@ from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, Val
 from pydantic_core import PydanticCustomError
 
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
-from vibsynth.limits import GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
+from vibsynth.limits import ACTUATOR_BOOST_MAX_DB, GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
 from vibsynth.settings.models_discovery import Discovery
@@ -181,7 +181,13 @@ class Actuator(Section):
         "explicit points [[Hz, dB], ...], interpolated on log-frequency; overrides profile",
         allowed=RESPONSE_POINTS.allowed(nullable=True),
     )
-    max_boost_db: float = setting(12.0, "the inverse-EQ never boosts more than this", unit="dB", ge=0, le=40)
+    max_boost_db: float = setting(
+        12.0,
+        "the inverse-EQ never boosts more than this above the response's level in the intensity band",
+        unit="dB",
+        ge=0,
+        le=ACTUATOR_BOOST_MAX_DB,
+    )
 
 
 class Osc(Section):
