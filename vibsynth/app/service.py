@@ -35,7 +35,7 @@ from vibsynth.engine.engine import Engine
 from vibsynth.engine.outputs import NullOutput, OutputBackend, SoundDeviceOutput, WavOutput
 from vibsynth.engine.supervisor import STREAMING, ExitGuard, hard_exit
 from vibsynth.errors import ConfigError, DeviceError, ParameterError, VibsynthError
-from vibsynth.settings.actuators import resolve_actuator_response
+from vibsynth.settings.actuators import resolve_actuator_absolute, resolve_actuator_response
 from vibsynth.settings.models_config import Audio, VibsynthConfig
 
 __all__ = ["build_engine", "open_output", "serve", "actuator_from_settings", "status_line"]
@@ -50,7 +50,9 @@ EXIT_DEADLINE_S = 1.5
 def actuator_from_settings(settings: VibsynthConfig) -> ActuatorResponse:
     """The actuator response to equalise for (explicit points, else the profile, else flat)."""
     points = resolve_actuator_response(settings)
-    return ActuatorResponse.from_points(points, max_boost_db=settings.actuator.max_boost_db)
+    return ActuatorResponse.from_points(
+        points, max_boost_db=settings.actuator.max_boost_db, absolute=resolve_actuator_absolute(settings)
+    )
 
 
 def build_engine(

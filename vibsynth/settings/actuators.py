@@ -28,7 +28,9 @@ __all__ = [
     "actuator_profiles",
     "load_actuator_profile",
     "resolve_actuator_response",
+    "resolve_actuator_absolute",
     "profile_problem",
+    "profile_rate_problem",
 ]
 
 ACTUATOR_RESOURCE = "config/actuators"
@@ -85,7 +87,8 @@ def load_actuator_profile(name: str) -> dict[str, Any]:
     -------
     profile : dict
         ``name``, ``description``, ``example`` (True for illustrative profiles), ``source``,
-        ``response`` [[Hz, dB], ...], ``file``.
+        ``response`` [[Hz, dB], ...], ``file``; a measured profile's ``absolute``, ``rate``,
+        ``weighting``, ``band_hz`` and ``provenance`` (None where the file has none).
     """
     profiles = actuator_profiles()
     if name not in profiles:
@@ -101,7 +104,27 @@ def load_actuator_profile(name: str) -> dict[str, Any]:
         "source": model.source,
         "response": [list(point) for point in model.response],
         "file": profiles[name],
+        "absolute": model.absolute,
+        "rate": model.rate,
+        "weighting": None if model.weighting is None else [list(p) for p in model.weighting],
+        "band_hz": None if model.band_hz is None else list(model.band_hz),
+        "provenance": model.provenance,
     }
+
+
+def profile_rate_problem(profile: dict[str, Any], rate: int) -> str | None:
+    """Why a measured profile does not fit an engine at ``rate`` Hz (measured at another rate), or None.
+
+    The converters' filters, the latency and the sensor chain's response were those of the
+    measuring rate; a profile measured at another rate is measured again rather than trusted.
+    """
+    measured = profile.get("rate")
+    if measured is None or int(measured) == int(rate):
+        return None
+    return (
+        f"actuator profile {profile['name']!r} was measured at {measured} Hz but audio.rate is {rate} Hz: measure it "
+        f"again at {rate} Hz (vibsynth calibrate response --set audio.rate={rate} ...) or set audio.rate: {measured}"
+    )
 
 
 def profile_problem(config: VibsynthConfig) -> PydanticCustomError | None:
@@ -114,12 +137,25 @@ def profile_problem(config: VibsynthConfig) -> PydanticCustomError | None:
         return None
     names = actuator_profiles()
     if profile in names:
-        return None
+        try:
+            loaded = load_actuator_profile(profile)
+        except ConfigError:
+            return None  # a broken profile file says so, with its line, where it is read
+        message = profile_rate_problem(loaded, config.audio.rate)
+        return None if message is None else cross_problem(message, "actuator.profile", "audio.rate")
     return cross_problem(
         f"actuator.profile = {profile!r}: no such profile (allowed: "
         f"{', '.join(sorted(names)) or 'none found'}, or null; user profiles go in {user_profile_dir()})",
         "actuator.profile",
     )
+
+
+def resolve_actuator_absolute(config: VibsynthConfig | Any) -> bool:
+    """Whether the response :func:`resolve_actuator_response` gives is a measured (absolute) profile's."""
+    actuator = settings_of(config).actuator
+    if actuator.response is not None or actuator.profile is None:
+        return False
+    return bool(load_actuator_profile(actuator.profile)["absolute"])
 
 
 def resolve_actuator_response(config: VibsynthConfig | Any) -> list[tuple[float, float]]:

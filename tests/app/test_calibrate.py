@@ -1,0 +1,104 @@
+"""Calibration checks and profiles without a sound card: synthetic recordings through app.calibrate."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from vibsynth.app.calibrate import CalibrationResult, check_measurement, profile_document, profile_path, write_profiles
+from vibsynth.dsp.measure import SweepPlan, measure_recording
+from vibsynth.errors import InputError, ParameterError
+from vibsynth.settings.actuators import profile_rate_problem, read_actuator_profile
+
+FS = 48000.0
+PLAN = SweepPlan(fs=FS, seconds=1.0, n_sweeps=3)
+
+
+def voice_coil(gain_db: float = -6.0):
+    w0 = 2 * math.pi * 65.0 / FS
+    alpha = math.sin(w0) / 6.0
+    c = math.cos(w0)
+    b = np.array([(1 + c) / 2, -(1 + c), (1 + c) / 2]) * 10 ** (gain_db / 20)
+    a = np.array([1 + alpha, -2 * c, 1 - alpha])
+    return b / a[0], a / a[0]
+
+
+def recording(gain_db: float | None = -6.0, noise: float = 1e-4, seed: int = 0) -> np.ndarray:
+    x = PLAN.stimulus()
+    y = np.zeros(x.size + 30000)
+    if gain_db is not None:
+        b, a = voice_coil(gain_db)
+        y[100 : 100 + x.size] = signal.lfilter(b, a, x)
+    return y + noise * np.random.default_rng(seed).standard_normal(y.size)
+
+
+def measured(**kw) -> object:
+    return measure_recording(recording(**kw), PLAN, max_latency_s=0.45)
+
+
+def test_a_good_recording_passes_and_makes_a_valid_absolute_profile(tmp_path):
+    m = measured()
+    check_measurement(m, input_label="system:1", level_dbfs=-12)
+    result = CalibrationResult(1, m, PLAN, "jack", "system", 1, latency_frames=100.0)
+    doc = profile_document(result, "coil", version="test")
+    assert doc["absolute"] is True and doc["rate"] == 48000
+    assert doc["provenance"]["latency_ms"] == pytest.approx(100 / 48, abs=0.01)
+    assert doc["provenance"]["snr_db_min"] > 40
+    lo, hi = doc["band_hz"]
+    assert 40 < lo < 150 < hi < 400
+    (path,) = write_profiles([result], str(tmp_path / "coil.yaml"), user_dir=tmp_path)
+    model = read_actuator_profile(path)
+    pts = np.array(model.response)
+    f0 = pts[np.argmax(pts[:, 1]), 0]
+    assert 55 < f0 < 75 and model.absolute and model.rate == 48000 and model.provenance["sweeps"] == 3
+    # the response is absolute: the sensitivity (-6 dB) and the Q=3 peak (+9.5 dB) show
+    assert pts[-1, 1] == pytest.approx(-6.0, abs=0.1) and pts[:, 1].max() == pytest.approx(3.6, abs=0.3)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "others", "message"),
+    [
+        ({"gain_db": 40.0}, None, "clipped during the sweep"),
+        ({"gain_db": None, "noise": 1e-6}, None, "no signal on input system:1"),
+        ({"gain_db": None, "noise": 1e-6}, {"gain_db": -6.0}, "came back on input channel 2"),
+        ({"gain_db": -40.0, "noise": 0.05}, None, "background noise on system:1"),
+        ({"gain_db": -20.0, "noise": 1e-3}, None, "too close to the sweep"),
+    ],
+)
+def test_bad_recordings_refused_with_one_message(kwargs, others, message):
+    m = measured(**kwargs)
+    extra = None if others is None else {2: measured(**others)}
+    with pytest.raises(InputError, match=message):
+        check_measurement(m, input_label="system:1", level_dbfs=-12, others=extra)
+
+
+def test_profile_names_and_paths(tmp_path):
+    assert profile_path("coil", 3, several=True, user_dir=tmp_path) == ("coil-ch3", tmp_path / "coil-ch3.yaml")
+    assert profile_path(None, 1, several=False, user_dir=tmp_path) == ("measured", tmp_path / "measured.yaml")
+    assert profile_path(str(tmp_path / "x.yaml"), 1, several=False, user_dir=tmp_path)[1] == tmp_path / "x.yaml"
+    with pytest.raises(ParameterError):
+        profile_path("bad name!", 1, several=False, user_dir=tmp_path)
+
+
+def test_a_profile_from_another_rate_is_refused_with_one_message():
+    profile = {"name": "coil", "rate": 44100}
+    assert profile_rate_problem(profile, 44100) is None
+    assert profile_rate_problem({"name": "flat", "rate": None}, 48000) is None
+    text = profile_rate_problem(profile, 48000)
+    assert text is not None and "measured at 44100 Hz but audio.rate is 48000 Hz" in text
+
+
+def test_a_config_naming_a_profile_from_another_rate_fails_to_load(tmp_path, monkeypatch):
+    from vibsynth.errors import ConfigError
+    from vibsynth.settings.config import load_config
+
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    folder = tmp_path / "vibsynth" / "actuators"
+    folder.mkdir(parents=True)
+    (folder / "coil.yaml").write_text("absolute: true\nrate: 44100\nresponse: [[10, -30.0], [1000, 0.0]]\n")
+    assert load_config(overrides={"actuator.profile": "coil", "audio.rate": 44100}).settings.actuator.profile == "coil"
+    with pytest.raises(ConfigError, match="measured at 44100 Hz but audio.rate is 48000 Hz"):
+        load_config(overrides={"actuator.profile": "coil", "audio.rate": 48000})
