@@ -27,6 +27,8 @@ log = logging.getLogger(__name__)
 
 OSCJSON_TYPE = "_oscjson._tcp.local."
 OSC_TYPE = "_osc._udp.local."
+#: How long the advertiser asks whether its name is taken before registering (ms).
+CHECK_MS = 1000
 #: Largest HOST_INFO answer read from a found service (bytes).
 HOST_INFO_CAP = 65536
 
@@ -126,39 +128,49 @@ class Advertiser:
 
     def _register(self) -> None:
         try:
-            from zeroconf import InterfaceChoice, NonUniqueNameException, Zeroconf
+            from zeroconf import DNSQuestionType, InterfaceChoice, NonUniqueNameException, Zeroconf
 
             explicit = [a for a in self.addresses if not _wildcard(a)]
             zc = Zeroconf(interfaces=explicit if explicit else InterfaceChoice.All)
             with self._lock:
                 self._zc = zc
-            infos = self._infos(self.name)
+            # Ask first, with a multicast question: probing alone can miss the owner's answer
+            # (a unicast reply to port 5353 reaches one of the sockets bound there, maybe not ours).
+            taken = zc.get_service_info(
+                OSCJSON_TYPE, f"{self.name}.{OSCJSON_TYPE}", timeout=CHECK_MS, question_type=DNSQuestionType.QM
+            )
             try:
-                for info in infos:
+                if taken is not None:
+                    raise NonUniqueNameException
+                for info in self._infos(self.name):
                     zc.register_service(info)
             except NonUniqueNameException:
-                self.conflicts += 1
-                self.count("discovery.name_conflict")
-                for info in infos:
-                    try:
-                        zc.unregister_service(info)
-                    except Exception:  # noqa: BLE001 - it may not have been registered
-                        pass
-                infos = self._infos(self.name)
-                zc.register_service(infos[0], allow_name_change=True)
-                self.name = infos[0].name[: -len(OSCJSON_TYPE) - 1]
-                zc.register_service(self._infos(self.name)[1], allow_name_change=True)
-                log.warning(
-                    "mDNS: the name %r is taken on the network; advertising as %r (set discovery.name)",
-                    self.requested_name,
-                    self.name,
-                )
+                self._rename(zc)
             self.registered.set()
             log.info("mDNS: advertising %r", self.name)
         except Exception as exc:  # noqa: BLE001 - no multicast, no interface: one line, OSC keeps working
             self.failed = str(exc) or type(exc).__name__
             self.count("discovery.advertise")
             log.warning("mDNS: cannot advertise %r (%s); OSCQuery still answers at its address", self.name, self.failed)
+
+    def _rename(self, zc: Any) -> None:
+        """The name is taken: count it once, say it once, advertise under the next free name (``NAME-2``)."""
+        self.conflicts += 1
+        self.count("discovery.name_conflict")
+        zc.unregister_all_services()
+        for suffix in range(2, 100):
+            name = f"{self.requested_name}-{suffix}"
+            if zc.get_service_info(OSCJSON_TYPE, f"{name}.{OSCJSON_TYPE}", timeout=CHECK_MS // 4) is None:
+                break
+        oscjson = self._infos(name)[0]
+        zc.register_service(oscjson, allow_name_change=True)
+        self.name = oscjson.name[: -len(OSCJSON_TYPE) - 1]
+        zc.register_service(self._infos(self.name)[1], allow_name_change=True)
+        log.warning(
+            "mDNS: the name %r is taken on the network; advertising as %r (set discovery.name)",
+            self.requested_name,
+            self.name,
+        )
 
     def stop(self) -> None:
         """Withdraw the services (goodbye packets) and close (idempotent)."""
