@@ -81,6 +81,11 @@ def main(folder: str) -> None:
         out["first"] = {"conflicts": first.conflicts, "name": first.name}
         rival.stop()
         first.stop()
+        against_serve = Advertiser(NAME, 9560, 9562, ["127.0.0.1"])  # the name serve advertises
+        against_serve.start()
+        against_serve.wait()
+        out["serve_conflict"] = {"conflicts": against_serve.conflicts, "name": against_serve.name}
+        against_serve.stop()
         out["after_conflict"] = OSCQueryClient(service).get_host_info().osc_port
         browser.zc.close()
     finally:

@@ -50,4 +50,5 @@ def test_python_oscquery_browses_the_service_in_a_private_namespace(tmp_path: Pa
     assert out["client_discover"] == pytest.approx(0.625)  # Client.discover() reached the same server
     assert out["first"] == {"conflicts": 0, "name": "rival"}
     assert out["conflict"]["conflicts"] == 1 and out["conflict"]["name"] == "rival-2"
+    assert out["serve_conflict"] == {"conflicts": 1, "name": "vibsynth netns-2"}  # across processes too
     assert out["conflict"]["failed"] is None and out["after_conflict"] == 9570
