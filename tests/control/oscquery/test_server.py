@@ -287,3 +287,33 @@ def test_a_malformed_websocket_frame_closes_that_socket_only_and_is_counted(serv
         time.sleep(0.02)
     assert server.refused()["malformed"] == 1 and not server.clients
     assert get(server, "/vibsynth/ch/1/intensity?VALUE") == (200, {"VALUE": [0.0]})
+
+
+def test_an_adapter_registers_nodes_and_listeners_get_its_values(server, tree):
+    from vibsynth.control.oscquery.tree import NodeSpec
+
+    level = [0.0]
+
+    class Avatar:  # what the VRChat bridge registers (/avatar/parameters/...)
+        def nodes(self):
+            return {"/avatar/parameters/ChestL": NodeSpec("f", "proximity 0..1", lambda ctx: [level[0]])}
+
+    async def run():
+        session, ws = await _ws(server)
+        try:
+            await asyncio.sleep(0.1)
+            tree.register(Avatar())
+            server.structure_changed()
+            assert await _next_osc(ws) == {"COMMAND": "PATH_ADDED", "DATA": "/avatar/parameters/ChestL"}
+            await ws.send_str(json.dumps({"COMMAND": "LISTEN", "DATA": "/avatar/parameters/ChestL"}))
+            assert (await _next_osc(ws)).args == (0.0,)
+            level[0] = 0.5
+            server.value_changed("/avatar/parameters/ChestL")
+            moved = await _next_osc(ws)
+            assert moved.address == "/avatar/parameters/ChestL" and moved.args == (0.5,)
+        finally:
+            await ws.close()
+            await session.close()
+
+    asyncio.run(run())
+    assert get(server, "/avatar/parameters/ChestL?VALUE") == (200, {"VALUE": [0.5]})

@@ -580,6 +580,11 @@ class OscQueryServer(LoopServer):
         if events:
             self.notify_structure(events)
 
+    def structure_changed(self) -> None:
+        """Nodes were added or removed (any thread; e.g. after :meth:`Tree.register`): rebuild and tell the
+        clients now instead of within :data:`REFRESH_S`."""
+        self.call_in_loop(lambda: asyncio.ensure_future(self._rebuild()))
+
     def notify_structure(self, events: list[tuple[str, str]]) -> None:
         """Send ``PATH_ADDED`` / ``PATH_REMOVED`` / ``PATH_CHANGED`` to every client (on the loop)."""
         self.structure_events += len(events)

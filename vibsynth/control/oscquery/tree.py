@@ -4,7 +4,11 @@ A node is built from a :class:`NodeSpec` (TYPE, ACCESS, RANGE, UNIT, DESCRIPTION
 read its VALUE). The specs of the OSC methods are in :mod:`~vibsynth.control.oscquery.methods`;
 the handler says which methods it answers (:meth:`OscHandler.method_names`), its address space
 says where (global, ``ch/{n}``, ``source/{k}``). Further nodes come from a :class:`NodeTable`
-registered with :meth:`Tree.register` (the VRChat bridge's ``/avatar``).
+registered with :meth:`Tree.register` (the VRChat bridge's ``/avatar``); the adapter then calls
+:meth:`~vibsynth.control.oscquery.server.OscQueryServer.structure_changed` (clients get
+``PATH_ADDED`` at once) and, whenever one of its values changes,
+:meth:`~vibsynth.control.oscquery.server.OscQueryServer.value_changed` (listeners get it within
+5 ms; without the call they get it within the 50 ms poll).
 
 Rules every node keeps (Vidvox OSCQueryProposal; ``tests/control/oscquery/test_tree.py``):
 
