@@ -74,6 +74,8 @@ def test_render_follow_failures_are_one_line_and_write_nothing(tmp_path, capsys)
     assert not (tmp_path / "o.wav").exists() and not list(tmp_path.glob(".o.wav*"))
     assert main(["render", "--balance", "0", "--intensity", "0.5", "--follow-mode", "audio", "-o", "o.wav"]) == 2
     assert "--follow-mode, --follow-focus, --jobs and --dask go with --follow" in capsys.readouterr().err
+    assert main(["render", "--follow", "inf.wav", "--seconds", "2", "-o", "o.wav"]) == 2
+    assert "--seconds does not apply" in capsys.readouterr().err
 
 
 def test_render_clip_takes_a_clip_file(tmp_path, capsys):

@@ -236,6 +236,9 @@ def run(args: argparse.Namespace) -> int:
     if args.follow:
         from vibsynth.settings.config import load_config
 
+        if args.seconds is not None:
+            raise ParameterError("render --follow renders the input's own length; --seconds does not apply")
+
         overrides = {"audio": {"rate": int(args.rate)}} if args.rate else None
         return run_follow_render(args, load_config(args.config, overrides=overrides).settings)
     if (args.follow_mode, args.follow_focus, args.jobs, args.dask) != ("vibration", "all", None, None):
