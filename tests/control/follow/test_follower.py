@@ -218,3 +218,13 @@ def test_a_transient_jumps_then_decays_linearly_back_to_the_curve():
     assert env.value(0.3, 140) == 0.3 and not env.active
     assert env.trigger(0.9, 1.0, 200) == 1.0  # at most 1
     assert env.trigger(0.1, 0.1, 205, now=0.95) == 0.95  # a new onset takes over from the running decay
+
+
+def test_an_input_that_has_not_started_yet_is_not_lost(make_rig):
+    """A file waits for the output clock: no frame yet is not a loss, however long it takes."""
+    rig = make_rig()
+    rig.idle(2.0)
+    assert not rig.follower.lost and rig.follower.losses == 0
+    rig.feed(tone(FS, 0.2, 10 ** (-50 / 20)))
+    rig.idle(0.6)
+    assert rig.follower.lost and rig.follower.losses == 1

@@ -165,6 +165,7 @@ class Follower:
         self._status: dict[str, Any] = {}
         self._status_at = -math.inf
         self._last_data = -math.inf
+        self._had_data = False
         self._started_at = -math.inf
         self.lost = False
         #: Input frames dropped because the worker fell behind, and how often it did.
@@ -255,13 +256,15 @@ class Follower:
         state = self._input_state(now)
         if block.shape[0]:
             self._last_data = now
+            self._had_data = True
             if self.lost:
                 self._recover()
             self._track(block)
             return ring.available > 0
-        silent_for = now - self._last_data
-        if not self.lost and (state in LOST_STATES or silent_for > self.loss_timeout_s):
-            self._lose(state if state in LOST_STATES else "no input")
+        # a stall counts once frames have flowed (a file waits for the output clock to start)
+        stalled = self._had_data and now - self._last_data > self.loss_timeout_s
+        if not self.lost and (state in LOST_STATES or stalled):
+            self._lose(state if state in LOST_STATES else "stalled")
         return False
 
     def _input_state(self, now: float) -> str:
@@ -360,7 +363,9 @@ class Follower:
     def _lose(self, why: str) -> None:
         self.lost = True
         self.losses += 1
-        reason = self._status.get("reason") or why
+        reason = self._status.get("reason") or (
+            f"no frame for {self.loss_timeout_s:g} s" if why == "stalled" else "no more frames"
+        )
         policy = self.follow.on_loss
         log.warning("follow: input %s (%s); %s", why, reason, "holding" if policy == "hold" else "fading out")
         if policy != "fade":
