@@ -49,10 +49,23 @@ def test_level_steps_are_followed_per_window(basis):
     r = follow(x, fs, basis=basis)
     ref, tracked = window_levels(r, x, fs)
     assert np.max(np.abs(tracked - ref)) < 1.0
+    for t0 in np.arange(0.0, 2.5, 0.5):
+        inside = (r.times > t0) & (r.times <= t0 + 0.5)
+        assert abs(r.balance[inside].mean() - 0.5) < 0.3
     # a step shows within a hop of its time: latency compensated
     step = np.flatnonzero(r.times >= 0.6)[0]
     after, before = r.level_db[step + 2 : step + 8], r.level_db[step - 8 : step - 2]
     assert 10 * np.log10(np.mean(10 ** (after / 10))) > -52.0 > 10 * np.log10(np.mean(10 ** (before / 10)))
+
+
+def test_big_level_steps_do_not_swing_the_balance(basis):
+    fs = 48000.0
+    levels = [-60.0, -45.0, -65.0, -50.0]
+    x = np.concatenate([noise(basis, 1.0, lv, fs, 1.0, seed=i) for i, lv in enumerate(levels)])
+    r = follow(x, fs, basis=basis)
+    for t0 in np.arange(0.0, 4.0, 0.5):
+        inside = (r.times > t0) & (r.times <= t0 + 0.5)
+        assert abs(r.balance[inside].mean() - 1.0) < 0.3
 
 
 def test_big_steps_blur_only_the_windows_at_the_step(basis):

@@ -193,3 +193,16 @@ def test_live_changes_apply_without_reset(basis, rng):
     tracker.set_params(default_params("audio").with_(gain_db=-10.0))
     after = tracker.process(x)
     assert np.median(after.intensity) == pytest.approx(np.median(before.intensity[100:]) - 10.0 / 40.0, abs=0.02)
+
+
+def test_audio_frames_do_not_depend_on_block_size(basis, speech, rng):
+    x, fs = speech
+    reference = Tracker(fs=fs, params=default_params("audio", "effects"), basis=basis)
+    whole = [reference.process(x[:2048]), reference.process(x[2048:])]
+    tracker = Tracker(fs=fs, params=default_params("audio", "effects"), basis=basis)
+    cuts = np.concatenate(([2048], np.sort(rng.integers(2049, x.size, 300))))
+    parts = [tracker.process(p) for p in np.split(x, cuts)]
+    for key in ("end_sample", "intensity", "balance", "onset_strength"):
+        a = np.concatenate([getattr(p, key) for p in parts])
+        b = np.concatenate([getattr(p, key) for p in whole])
+        assert np.allclose(a, b, atol=1e-9), key

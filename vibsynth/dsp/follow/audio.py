@@ -133,7 +133,7 @@ class AudioAnalyzer:
         self._lags = slice(lo, min(hi + 1, self.n_pitch // 2))
         self._pitch_every = max(1, int(round(0.01 / self.hop_s)))
         self._frame = 0
-        self._octave_power = np.zeros(len(octaves))
+        self._octave_zi = np.zeros((1, len(octaves)))
         self._tonal_raw = 0.0
         self._tonal = 0.0
         self._loud = -200.0
@@ -161,7 +161,7 @@ class AudioAnalyzer:
         self.onsets.reset()
         self._history[:] = 0.0
         self._frame = 0
-        self._octave_power[:] = 0.0
+        self._octave_zi[:] = 0.0
         self._tonal_raw = self._tonal = 0.0
         self._loud = -200.0
         self._balance = 0.0
@@ -172,35 +172,68 @@ class AudioAnalyzer:
         """The held tonality score 0..1 of the newest frame."""
         return self._tonal
 
-    def _spectral(self, window: NDArray[np.float64]) -> None:
-        """Update the smoothed octave powers (tilt) and the tonality from the newest samples."""
-        spec = np.abs(np.fft.rfft(window[-self.n_fft :] * self._hann)) ** 2
-        self._octave_power += self.balance_alpha * (self._octave_masks @ spec - self._octave_power)
-        if self._frame % self._pitch_every == 0:
-            seg = window[-self.n_pitch :] * self._pitch_win
-            p = np.abs(np.fft.rfft(seg, 2 * self.n_pitch)) ** 2
-            acf = np.fft.irfft(p)[: self.n_pitch]
-            h = 0.0
-            if acf[0] > 1e-20:
-                r = acf[self._lags] / acf[0] / self._win_acf[self._lags]
-                h = float(np.clip(r.max(), 0.0, 1.0)) if r.size else 0.0
-            spec_total = float(spec[self._all_mask].sum())
-            voice = float(spec[self._voice_mask].sum()) / spec_total if spec_total > 0 else 0.0
-            self._tonal_raw = float(np.clip((h - 0.5) / 0.3, 0, 1) * np.clip((voice - 0.5) / 0.3, 0, 1))
-        tau = _TONAL_ATTACK_S if self._tonal_raw > self._tonal else _TONAL_RELEASE_S
-        self._tonal += _smoothing(tau, self.hop_s) * (self._tonal_raw - self._tonal)
-        self._frame += 1
+    def _spectral(
+        self, joined: NDArray[np.float64], stops: NDArray[np.intp]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Balance and held tonality of the frames whose windows end at ``stops`` in ``joined``.
 
-    def _tilt(self) -> float:
-        p = self._octave_power
-        ok = p > max(1e-30, p.max() * 1e-9)
-        if np.count_nonzero(ok) < 3:
-            return self._balance
-        x = self._log2_f[ok] - self._log2_f[ok].mean()
-        y = 10.0 * np.log10(p[ok])
-        slope = float(x @ y) / float(x @ x)  # least-squares line through the octave bands
+        One batch of FFTs per block: the windows' octave powers (smoothed over ``balance_ms``, a
+        linear recursion run by ``lfilter``), the tilt of each, and every ``_pitch_every``-th
+        frame's periodicity; only the asymmetric tonality hold runs frame by frame.
+        """
+        n = stops.size
+        if n == 0:  # (lfilter returns an undefined state for an empty input)
+            return np.zeros(0), np.zeros(0)
+        idx = stops[:, np.newaxis] - self.n_fft + np.arange(self.n_fft)
+        spec = np.abs(np.fft.rfft(joined[idx] * self._hann, axis=1)) ** 2
+        a = self.balance_alpha
+        octave, zf = signal.lfilter([a], [1.0, a - 1.0], spec @ self._octave_masks.T, axis=0, zi=self._octave_zi)
+        self._octave_zi = zf
+        balance = self._tilts(octave)
+        frames = self._frame + np.arange(n)
+        pitch = np.flatnonzero(frames % self._pitch_every == 0)
+        raw = np.full(n, np.nan)
+        if pitch.size:
+            pidx = stops[pitch, np.newaxis] - self.n_pitch + np.arange(self.n_pitch)
+            p = np.abs(np.fft.rfft(joined[pidx] * self._pitch_win, 2 * self.n_pitch, axis=1)) ** 2
+            acf = np.fft.irfft(p, axis=1)[:, : self.n_pitch]
+            zero = np.maximum(acf[:, :1], 1e-30)
+            r = acf[:, self._lags] / zero / self._win_acf[self._lags]
+            h = np.where(acf[:, 0] > 1e-20, np.clip(r.max(axis=1), 0.0, 1.0), 0.0)
+            sp = spec[pitch]
+            total = sp[:, self._all_mask].sum(axis=1)
+            voice = np.where(total > 0, sp[:, self._voice_mask].sum(axis=1) / np.maximum(total, 1e-300), 0.0)
+            raw[pitch] = np.clip((h - 0.5) / 0.3, 0, 1) * np.clip((voice - 0.5) / 0.3, 0, 1)
+        tonal = np.empty(n)
+        up, down = _smoothing(_TONAL_ATTACK_S, self.hop_s), _smoothing(_TONAL_RELEASE_S, self.hop_s)
+        for i in range(n):
+            if raw[i] == raw[i]:  # not NaN: a frame with a new periodicity measure
+                self._tonal_raw = float(raw[i])
+            self._tonal += (up if self._tonal_raw > self._tonal else down) * (self._tonal_raw - self._tonal)
+            tonal[i] = self._tonal
+        self._frame += n
+        return balance, tonal
+
+    def _tilts(self, octave: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Balance of each row of smoothed octave powers (held where fewer than 3 bands have power)."""
+        ok = octave > np.maximum(1e-30, octave.max(axis=1, keepdims=True) * 1e-9)
+        w = ok.astype(np.float64)
+        count = w.sum(axis=1)
+        x = np.broadcast_to(self._log2_f, octave.shape)
+        xm = (w * x).sum(axis=1, keepdims=True) / np.maximum(count[:, np.newaxis], 1.0)
+        with np.errstate(divide="ignore"):
+            y = np.where(ok, 10.0 * np.log10(np.maximum(octave, 1e-300)), 0.0)
+        xc = w * (x - xm)
+        denom = (xc * xc).sum(axis=1)
+        slope = (xc * y).sum(axis=1) / np.where(denom > 0, denom, 1.0)  # least squares through the bands
         lo, hi = self.balance_limits
-        return float(np.clip((slope - TILT_CENTRE_DB) / TILT_PER_UNIT_DB, lo, hi))
+        balance = np.clip((slope - TILT_CENTRE_DB) / TILT_PER_UNIT_DB, lo, hi)
+        out = np.empty(octave.shape[0])
+        for i, (valid, value) in enumerate(zip(count >= 3, balance)):
+            if valid:
+                self._balance = float(value)
+            out[i] = self._balance
+        return out
 
     def process(
         self, y: NDArray[np.float64], ends: NDArray[np.intp]
@@ -226,32 +259,25 @@ class AudioAnalyzer:
         n = ends.size
         level = np.empty(n)
         drive = np.empty(n)
-        balance = np.empty(n)
-        tonal = np.empty(n)
         with np.errstate(divide="ignore"):
             raw = -0.691 + 10.0 * np.log10(power)
             bass_db = -0.691 + 10.0 * np.log10(bass_power)
         beat_alpha = _smoothing(_BEAT_DECAY_S, self.hop_s)
+        balance, tonal = self._spectral(joined, (base + ends).astype(np.intp))
         for i in range(n):
-            self._spectral(joined[: base + ends[i]])
             target = max(float(raw[i]), -200.0)
             if target > self._loud:  # attack on power: out of silence the level is there in one hop
-                gained = 10.0 ** (self._loud / 10.0) + self.attack * (
-                    10.0 ** (target / 10.0) - 10.0 ** (self._loud / 10.0)
-                )
-                self._loud = 10.0 * math.log10(gained)
+                now = 10.0 ** (self._loud / 10.0)
+                self._loud = 10.0 * math.log10(now + self.attack * (10.0 ** (target / 10.0) - now))
             else:  # release in dB: a steady fade, as the hand expects
                 self._loud += self.release * (target - self._loud)
             level[i] = self._loud if self._loud > -199.0 else -np.inf
-            self._balance = self._tilt()
-            balance[i] = self._balance
-            tonal[i] = self._tonal
             if strength[i] > 0:
                 self._beat = max(self._beat, 1.0)
             else:
                 self._beat -= beat_alpha * self._beat
             if p.focus == "effects":
-                drive[i] = level[i] - TONAL_PENALTY_DB * self._tonal
+                drive[i] = level[i] - TONAL_PENALTY_DB * tonal[i]
             elif p.focus == "bass":
                 drive[i] = bass_db[i]
             elif p.focus == "beat":
