@@ -8,7 +8,7 @@ import pytest
 
 from tests.control.osc.fakes import make_controller
 from vibsynth.control.osc.server import OscServer
-from vibsynth.control.oscquery import adapter
+from vibsynth.control.oscquery import adapter, oscquery_of
 from vibsynth.settings.config import load_config
 
 
@@ -36,9 +36,11 @@ def test_serve_builds_it_for_the_osc_server_and_status_shows_its_counters(osc):
         keys = dict(osc.handler.status_pairs())
         assert keys["oscquery_clients"] == 0 and keys["oscquery_refused"] == 0
         assert service.describe().startswith(f"OSCQuery on http://127.0.0.1:{service.server.port}/")
+        assert oscquery_of(osc.controller) is service  # where an adapter registers its nodes
     finally:
         service.stop()
     assert "oscquery_clients" not in dict(osc.handler.status_pairs())
+    assert oscquery_of(osc.controller) is None
 
 
 def test_off_switches_and_explicit_interfaces(osc):

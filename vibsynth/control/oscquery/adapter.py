@@ -12,6 +12,7 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
+from vibsynth.control import oscquery
 from vibsynth.control.controller import Controller
 from vibsynth.control.oscquery.discovery import Advertiser, default_name
 from vibsynth.control.oscquery.methods import method_nodes, reads
@@ -65,8 +66,10 @@ class OscQueryService:
         if self.advertiser is not None:
             self.advertiser.oscquery_port = self.server.port
             self.advertiser.start()
+        oscquery.attach(self.server.controller, self)
 
     def stop(self) -> None:
+        oscquery.detach(self.server.controller, self)
         if self.advertiser is not None:
             self.advertiser.stop()
         self.server.handler.extra_status = self._previous_status
