@@ -24,6 +24,7 @@ Run: ``scripts/with_jack.sh -- .venv/bin/python -m pytest tests/e2e/test_follow_
 from __future__ import annotations
 
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -40,7 +41,7 @@ from tests.e2e.studioutil import (
     start_serve,
     wait_for,
 )
-from tests.e2e.test_input_jack_e2e import jack_ports, new_ports
+from tests.e2e.test_input_jack_e2e import jack_ports
 
 pytestmark = pytest.mark.e2e
 
@@ -48,6 +49,13 @@ FS = 48000
 QUIET_DB, LOUD_DB = -70.0, -50.0  # band levels: knob 0.25 and 0.75 (knobs.ceiling_db -40, range_db 40)
 QUIET_S, LOUD_S = 6.0, 60.0
 CONFIG = "follow:\n  enabled: true\n  device: 'system:1,2'\n  mode: vibration\nknobs:\n  glide_ms: 0\n"
+
+
+def new_ports(before: set[str]) -> list[str]:
+    """PortAudio input ports that appeared since ``before``, in port order (the JACK client of a second serve
+    running at once is ``PortAudio-01``)."""
+    fresh = [p for p in jack_ports() - before if re.fullmatch(r"PortAudio[^:]*:in_\d+", p)]
+    return sorted(fresh, key=lambda name: (len(name), name))
 
 
 def knob_of(level_db: float) -> float:
@@ -136,6 +144,8 @@ def test_the_meter_and_the_trace_follow_a_level_step(page, served, tmp_path):
             lambda: abs(data(page, "follow-trace", "intensity") - knob_of(QUIET_DB)) < 0.04,
             what="the quiet intensity in the trace",
         )
+        settled = data(page, "follow-trace", "t") + 0.5  # the newest 0.4 s of the line drawn are all quiet
+        wait_for(lambda: data(page, "follow-trace", "t") > settled, what="the quiet trace")
         quiet_rows = page.execute_script(INTENSITY_ROWS)
         loud_peak = LOUD_DB + 3.0
         wait_for(
@@ -146,6 +156,8 @@ def test_the_meter_and_the_trace_follow_a_level_step(page, served, tmp_path):
             what="the loud intensity in the trace",
         )
         wait_for(lambda: data(page, "follow-trace", "level-db") > LOUD_DB - 1.0, what="the tracked level")
+        settled = data(page, "follow-trace", "t") + 0.5
+        wait_for(lambda: data(page, "follow-trace", "t") > settled, what="the loud trace")
         # the line drawn: 20 dB louder = half the intensity axis higher, at the newest end of the trace
         loud_rows = page.execute_script(INTENSITY_ROWS)
         width = len(loud_rows)
@@ -254,7 +266,13 @@ def test_without_follow_the_panel_says_how_to_start_and_starts_the_picked_input(
         wait_for(lambda: len(picker.find_elements("css selector", "option")) > 1, what="the input devices")
         before = jack_ports()
         Select(picker).select_by_value("system")
-        wait_for(lambda: len(new_ports(before)) == 2, what="the input's JACK ports")
+
+        def ports_up() -> bool:
+            shown = by_testid(browser, "follow-error").text
+            assert not shown, shown  # wait_for shows the panel's error at its deadline
+            return len(new_ports(before)) == 2
+
+        wait_for(ports_up, what="the input's JACK ports")
         wait_for(
             lambda: len(browser.find_elements("css selector", '[data-testid="follow-toggle"]')) == 2, what="routes"
         )
