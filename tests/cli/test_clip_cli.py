@@ -272,3 +272,18 @@ def test_import_to_a_file_takes_the_file_s_name(tmp_path, capsys):
     src.write_text(meta([{"time": 0, "amplitude": 0.5}, {"time": 0.2, "amplitude": 0.5}]))
     code, out, _ = run(capsys, "clip", "import", str(src), "-o", str(tmp_path / "back.yaml"))
     assert code == 0 and load_clip(tmp_path / "back.yaml").name == "back"
+
+
+def test_a_folder_of_real_recordings_converts(tmp_path, capsys):
+    """The spoken channel names of alsa-utils (recordings no one here made; scripts/setup.sh --test installs them)."""
+    from pathlib import Path
+
+    alsa = Path("/usr/share/sounds/alsa")
+    if not any(alsa.glob("*.wav")):
+        pytest.skip("alsa-utils' sounds are not installed")
+    code, out, err = run(capsys, "clip", "from-audio", str(alsa), "-o", str(tmp_path / "alsa"), "--mode", "audio")
+    sources = sorted(alsa.glob("*.wav"))
+    assert code == 0 and err == "" and f"{len(sources)} of {len(sources)} files converted (0 failed)" in out
+    for src in sources:
+        clip = load_clip(tmp_path / "alsa" / f"{src.stem}.yaml")
+        assert max(k.intensity for k in clip.keyframes) > 0.1  # a voice shakes (focus all)
