@@ -260,6 +260,9 @@ class MidiMapping(Section):
     balance: _Bindings = setting(
         [{"cc": 74}, {"cc": 1}], "MIDI CC/NRPN bindings of the balance knob", allowed=_BINDINGS_ALLOWED
     )
+    follow_gain: _Bindings = setting(
+        [], "bindings of live Follow's gain (range in dB, default [-24, 24])", allowed=_BINDINGS_ALLOWED
+    )
 
 
 class Midi(Section):

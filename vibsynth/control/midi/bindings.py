@@ -13,7 +13,12 @@ from vibsynth.settings.values import BINDABLE_CC_MAX
 if TYPE_CHECKING:
     from vibsynth.settings.models_config import Midi
 
-KNOBS = ("intensity", "balance")
+#: What a MIDI controller can be bound to (and learned for): the two knobs and live Follow's gain.
+KNOBS = ("intensity", "balance", "follow_gain")
+#: follow_gain: the dB a controller's 0..max spans when its binding gives no range.
+FOLLOW_GAIN_RANGE_DB = (-24.0, 24.0)
+#: Bound to nothing by default: MIDI learn writes them into a config file only once bound.
+OPTIONAL_KNOBS = ("follow_gain",)
 
 
 def check_learn_knob(knob: str) -> None:

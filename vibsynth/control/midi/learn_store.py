@@ -7,7 +7,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from vibsynth.control.midi.bindings import DEFAULT_NRPN, KNOBS, Binding
+from vibsynth.control.midi.bindings import DEFAULT_NRPN, KNOBS, OPTIONAL_KNOBS, Binding
 from vibsynth.settings.config import CONFIG_ENV_VAR, user_config_file
 
 
@@ -98,6 +98,8 @@ def save_learned_mapping(
                 item = CommentedMap(b.to_config())
                 item.fa.set_flow_style()
                 entries.append(item)
+        if not entries and knob in OPTIONAL_KNOBS and knob not in mapping:
+            continue  # nothing bound and nothing to override: the file stays as it was
         entries.fa.set_flow_style()
         mapping[knob] = entries
     _drop_displaced_shorthand(midi, bindings)

@@ -57,6 +57,7 @@ from typing import Any, Protocol
 import mido
 
 from vibsynth.control.clips import player_of
+from vibsynth.control.follow import follower_of
 from vibsynth.control.midi.bindings import (
     _NOTES_OFF_CCS,
     _REALTIME,
@@ -69,6 +70,7 @@ from vibsynth.control.midi.bindings import (
     CC_RESET_CONTROLLERS,
     CC_RPN_LSB,
     CC_RPN_MSB,
+    FOLLOW_GAIN_RANGE_DB,
     Binding,
     MidiSettings,
     check_learn_knob,
@@ -505,7 +507,9 @@ class MidiMapper:
             applied = True
             if b.invert:
                 raw = top - raw
-            if b.knob == "intensity":
+            if b.knob == "follow_gain":
+                self._follow_gain(b, raw, top)
+            elif b.knob == "intensity":
                 low = 0.0 if b.low is None else b.low
                 high = 1.0 if b.high is None else b.high
                 value = _clamp(scale_raw(raw, top, low, high, centred=False), 0.0, 1.0)
@@ -526,6 +530,16 @@ class MidiMapper:
         if not applied:
             self._reject("midi_unknown_cc")
         return applied
+
+    def _follow_gain(self, b: Binding, raw: int, top: int) -> None:
+        """Live Follow's gain from a controller (counted as ``midi_no_follow`` while follow does not run)."""
+        follower = follower_of(self.controller)
+        if follower is None:
+            self._reject("midi_no_follow")
+            return
+        low = FOLLOW_GAIN_RANGE_DB[0] if b.low is None else b.low
+        high = FOLLOW_GAIN_RANGE_DB[1] if b.high is None else b.high
+        follower.set_gain(scale_raw(raw, top, low, high, centred=False))
 
     def _cc_glide(self, midi_channel: int, key: Any, at_frame: int | None) -> float | None:
         max_s = self.settings.cc_glide_max_s
