@@ -1,4 +1,4 @@
-"""Controller layers: knobs < sources < clip, with the real engine enforcing the same order."""
+"""Controller layers: knobs < follow < sources < clip, with the real engine enforcing the same order."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import pytest
 
 from vibsynth.control.controller import Controller, KnobEvent
 from vibsynth.engine.bank import BankSpec, build_bank
+from vibsynth.engine.commands import LAYER_NAMES
 from vibsynth.engine.engine import Engine
 from vibsynth.errors import ParameterError
 from vibsynth.formats.basis_file import default_basis
@@ -141,13 +142,13 @@ def test_random_layer_traffic_keeps_controller_and_engine_in_agreement(rig):
         if op == 0:
             ctl.set_knob("intensity", value, channels=chans)
         elif op in (1, 2):
-            ctl.drive(("sources", "clip")[op - 1], channels=chans, intensity=value, glide_s=0.0)
+            ctl.drive(("follow", "sources", "clip")[int(rng.integers(3))], channels=chans, intensity=value, glide_s=0.0)
         elif op == 3:
-            ctl.release(("sources", "clip")[int(rng.integers(2))], channels=chans, glide_s=0.0)
+            ctl.release(("follow", "sources", "clip")[int(rng.integers(3))], channels=chans, glide_s=0.0)
         else:
             ctl.set_knob("balance", float(rng.uniform(-2, 2)), channels=chans)
         engine.render(int(rng.integers(1, 300)))
     engine.render(10)
     for c in range(3):
         assert plays(engine, c) == pytest.approx(ctl.get("texture", c), abs=1e-9)
-        assert engine.layers()[c] == ("knobs", "sources", "clip").index(ctl.driver(c))
+        assert engine.layers()[c] == LAYER_NAMES.index(ctl.driver(c))

@@ -14,8 +14,9 @@ ORDER = 7
 HELP = """\
 Ask a running `vibsynth serve` for its state (OSC /vibsynth/status) and show it:
 the output (device, host API, rate, block; streaming, null or device lost), the engine
-(load, underflows, scheduled moves), the control counters and the last error, then each
-channel's knobs. --format json prints every key the server sent (docs/osc.md lists them).
+(load, underflows, scheduled moves), the control counters, live Follow's input, level and
+gate (when it runs) and the last error, then each channel's knobs. --format json prints
+every key the server sent (docs/osc.md lists them).
 Exit code 1 when no server answers.
 """
 
@@ -27,6 +28,8 @@ CHANNEL_COLUMNS = (
     Column("mute", "mute", lambda v: "muted" if v else "-"),
     Column("preset", "preset", lambda v: v or "-"),
 )
+#: Shown while live Follow runs: whether each channel follows the input.
+FOLLOW_COLUMN = Column("follow", "follow", lambda v: {1: "on", 0: "off"}.get(v, "-"))
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -49,6 +52,8 @@ def channels_of(status: dict[str, Any]) -> list[dict[str, Any]]:
         row: dict[str, Any] = {"channel": ch}
         for key in ("intensity", "balance", "glide", "mute", "preset"):
             row[key] = status.get(f"ch{ch}.{key}", "" if key == "preset" else 0)
+        if "follow.device" in status:
+            row["follow"] = status.get(f"ch{ch}.follow", "")  # absent: no follow route into the channel
         rows.append(row)
     return rows
 
@@ -84,6 +89,12 @@ def summary(status: dict[str, Any], where: str) -> str:
         f"errors {_v(s, 'errors')}, malformed {_v(s, 'malformed')}, denied {_v(s, 'denied')}, "
         f"subscribers {_v(s, 'subscribers')}"
     )
+    if "follow.device" in s:
+        gate = "open" if s.get("follow.gate") else "closed"
+        lines.append(
+            f"  follow    {s['follow.device']}, level {_v(s, 'follow.level_db')} dB, gate {gate} "
+            f"(at {_v(s, 'follow.gate_db')} dB), gain {_v(s, 'follow.gain')} dB, focus {s.get('follow.focus', '?')}"
+        )
     if s.get("last_error"):
         lines.append(f"  last error {float(s.get('last_error_age', 0)):.0f} s ago: {s['last_error']}")
     return "\n".join(lines)
@@ -96,12 +107,13 @@ def run(args: argparse.Namespace) -> int:
     with Client(host, port, timeout=args.timeout) as client:
         status = client.status()
     rows = channels_of(status)
+    columns = CHANNEL_COLUMNS + ((FOLLOW_COLUMN,) if "follow.device" in status else ())
     if args.format == "json":
         print(json.dumps(status, indent=2))
     elif args.format == "csv":
-        emit(rows, CHANNEL_COLUMNS, "csv")
+        emit(rows, columns, "csv")
     else:
         print(summary(status, f"{host}:{port}"))
         print()
-        print(format_table(rows, CHANNEL_COLUMNS))
+        print(format_table(rows, columns))
     return 0

@@ -10,9 +10,10 @@ OSC, MIDI, preset hot reload and the command line all go through a
 * channel numbers are 0-based here (adapters translate from their own convention).
 
 Layers: a channel's knobs are driven by one control layer at a time, the highest active
-one of ``knobs`` (direct control: OSC, MIDI, presets, the studio) < ``sources`` (the spatial
-mixer) < ``clip`` (the clip player). Direct knob moves on a channel a higher layer drives are
-remembered and play when that layer releases the channel (:meth:`Controller.release`);
+one of ``knobs`` (direct control: OSC, MIDI, presets, the studio) < ``follow`` (the live
+follower, control/follow) < ``sources`` (the spatial mixer) < ``clip`` (the clip player).
+Direct knob moves on a channel a higher layer drives are remembered and play when that
+layer releases the channel (:meth:`Controller.release`);
 the engine enforces the same rule in stream order (see :mod:`vibsynth.engine.engine`), so
 moves from the OSC fast path, which bypass this class, obey it too.
 
@@ -410,7 +411,7 @@ class Controller:
     # ------------------------------------------------------------------ layers
     @staticmethod
     def layer_index(layer: str) -> int:
-        """Engine index of a driving layer name (``sources`` or ``clip``; ``knobs`` is 0)."""
+        """Engine index of a driving layer name (``follow``, ``sources`` or ``clip``; ``knobs`` is 0)."""
         try:
             return LAYER_NAMES.index(layer)
         except ValueError:
@@ -454,7 +455,7 @@ class Controller:
 
         Parameters
         ----------
-        layer : {"sources", "clip"}
+        layer : {"follow", "sources", "clip"}
         channels : sequence of int, optional
             0-based; None = every channel.
         intensity, balance : float, optional
@@ -508,7 +509,7 @@ class Controller:
 
         Parameters
         ----------
-        layer : {"sources", "clip"}
+        layer : {"follow", "sources", "clip"}
         channels : sequence of int, optional
         glide_s : float, optional
             Glide to the next layer's targets (None: the channel's glide).

@@ -14,8 +14,9 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from vibsynth._version import __version__
+from vibsynth.control.follow import follower_of
 
-__all__ = ["engine_status", "output_status", "channel_status", "engine_stat"]
+__all__ = ["engine_status", "output_status", "channel_status", "engine_stat", "follow_status"]
 
 Pairs = list[tuple[str, object]]
 
@@ -96,3 +97,22 @@ def channel_status(controller: Any) -> Pairs:
             (f"ch{ch + 1}.preset", s.preset or ""),
         ]
     return pairs
+
+
+def follow_status(controller: Any, fit: Callable[[str, int], str] = lambda text, size: text[:size]) -> Pairs:
+    """``follow.device`` (the input and its state), ``follow.level_db`` (tracked input level, the
+    gate's units), ``follow.gate`` (1 = open), ``follow.gain``/``follow.gate_db`` (dB),
+    ``follow.focus``, ``follow.stale_frames`` and ``ch{n}.follow`` (1 = follows); none when follow is off."""
+    follower = follower_of(controller)
+    if follower is None:
+        return []
+    pairs: Pairs = [
+        ("follow.device", fit(follower.device_text(), 400)),
+        ("follow.level_db", float(round(follower.level_db(), 2))),
+        ("follow.gate", int(follower.gate_open())),
+        ("follow.gain", float(follower.gain_db)),
+        ("follow.gate_db", float(follower.gate_db)),
+        ("follow.focus", str(follower.focus)),
+        ("follow.stale_frames", int(follower.stale_frames)),
+    ]
+    return pairs + [(f"ch{c + 1}.follow", int(follower.is_on(c))) for c in follower.channels()]

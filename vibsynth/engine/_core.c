@@ -21,8 +21,8 @@
  * (scheduled submitted - scheduled done) reaches the cap, so the heap can never overflow
  * and the refusal happens on the control side, where it can be answered.
  *
- * Layers: a channel's knobs are driven by one control layer at a time (0 direct knobs,
- * 1 spatial sources, 2 clips). CMD_LAYER, in stream order, says which; a knob command moves
+ * Layers: a channel's knobs are driven by one control layer at a time (0 direct knobs, 1 follow,
+ * 2 spatial sources, 3 clips). CMD_LAYER, in stream order, says which; a knob command moves
  * only the channels its layer drives, so a knob message on a channel a clip plays, or a
  * clip move queued before the clip was stopped, never reaches the ramps. CMD_CANCEL drops a
  * layer's commands submitted before it (by sequence number), O(channels) per command.

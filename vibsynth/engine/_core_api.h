@@ -17,7 +17,7 @@ enum {
     CMD_VOICE = 7,  /* ptr/ival = float32 samples/length: play once; ptr NULL = set the playing voice's gain */
     CMD_VOICE_STOP = 8
 };
-#define VS_LAYERS 4 /* 0 knobs, 1 sources, 2 clip, 3 reserved */
+#define VS_LAYERS 4 /* 0 knobs, 1 follow, 2 sources, 3 clip (engine/commands.py LAYER_NAMES) */
 enum { PUSH_OK = 0, PUSH_RING_FULL = 1, PUSH_SCHEDULE_FULL = 2 };
 
 typedef struct {

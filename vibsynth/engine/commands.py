@@ -37,7 +37,7 @@ KnobName = Literal["intensity", "balance"]
 KNOB_NAMES: tuple[KnobName, ...] = ("intensity", "balance")
 
 #: Control layers that may drive a channel's knobs, by increasing priority (index = engine layer).
-LAYER_NAMES: tuple[str, ...] = ("knobs", "sources", "clip")
+LAYER_NAMES: tuple[str, ...] = ("knobs", "follow", "sources", "clip")
 
 
 @dataclass(frozen=True, slots=True)

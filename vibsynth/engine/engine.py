@@ -28,7 +28,7 @@ Per channel and per sample:
 5. **Mute/panic**: mute is a third ramped gain (``mute_fade_s`` for a full fade);
    panic glides every intensity to 0 over the mute fade, drops scheduled commands, stops
    voices and hands every channel back to direct knob control.
-6. **Layers**: one control layer at a time drives a channel's knobs (direct knobs, spatial
+6. **Layers**: one control layer at a time drives a channel's knobs (direct knobs, follow, spatial
    sources, clips: :data:`~vibsynth.engine.commands.LAYER_NAMES`); :class:`SetLayer` changes
    it in stream order and a knob move reaches only the channels its layer drives when it
    applies. :class:`CancelLayer` drops a layer's moves still waiting in the scheduler.

@@ -307,7 +307,7 @@ def test_pathological_patterns_match_in_linear_time():
     patterns = {
         "/vibsynth/" + "*a" * 40 + "x": 0,
         "/vibsynth/" + "*" * 28 + "x": 0,  # the regex took ~5 s on this one
-        "/vibsynth/" + "*" * 200: len(GLOBAL_METHODS),
+        "/vibsynth/" + "*" * 200: len([m for m in GLOBAL_METHODS if "/" not in m]),  # not follow/gain...
         "/vibsynth/" + "*" * 245 + "x": 0,
         "/vibsynth/ch/" + "*?" * 118 + "/*": 0,
         "/vibsynth/ch/*/" + "{a,b,i,n,t,e,s,y,}*" * 12: len(CHANNEL_METHODS) * 64,

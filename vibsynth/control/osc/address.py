@@ -51,7 +51,7 @@ MAX_PATTERN_LEN = 256
 MAX_FANOUT = 1024
 """Most routes one pattern may lead to; a pattern matching more is an error (nothing is done).
 
-The table holds ``17 + 10 x channels + 16 x 12`` routes (the sources'), 849 at the maximum of 64
+The table holds ``21 + 11 x channels + 16 x 12`` routes (the sources'), 917 at the maximum of 64
 channels (``audio.channels``), so every pattern, ``/vibsynth/ch/*/intensity`` and even
 ``/vibsynth/*/*/*`` included, fits on every supported configuration; the cap bounds the
 work of one message should the table ever grow.
@@ -75,10 +75,27 @@ GLOBAL_METHODS = (
     "monitor",
     "play",
     "stop",
+    "follow/gain",
+    "follow/gate",
+    "follow/focus",
+    "follow/get",
 )
-"""Methods under ``{prefix}/``; they act on every channel (or on the server)."""
+"""Methods under ``{prefix}/``; they act on every channel (or on the server). ``follow/...`` are
+live Follow's (``{prefix}/follow/gain``...: control/osc/follow.py)."""
 
-CHANNEL_METHODS = ("intensity", "balance", "texture", "glide", "mute", "preset", "speed", "get", "play", "stop")
+CHANNEL_METHODS = (
+    "intensity",
+    "balance",
+    "texture",
+    "glide",
+    "mute",
+    "preset",
+    "speed",
+    "get",
+    "play",
+    "stop",
+    "follow",
+)
 """Methods under ``{prefix}/ch/{n}/``; they act on channel n only."""
 
 SOURCE_METHODS = (
