@@ -52,3 +52,42 @@ def test_off_switches_and_explicit_interfaces(osc):
     assert service is not None and service.advertiser is not None  # built, not started: no multicast here
     assert service.advertiser.addresses == ["10.0.0.7"] and service.advertiser.name == "bench rig"
     assert service.advertiser.osc_port == osc.port
+
+
+def test_notify_over_the_websocket_pushes_from_its_thread_and_ends_with_the_socket(osc):
+    import asyncio
+
+    import aiohttp
+
+    from vibsynth.control.osc.codec import Bundle, decode_packet, encode_message, iter_messages
+
+    service = adapter.create(settings(), SimpleNamespace(oscquery_port=0), osc.controller, osc)
+    service.start()
+
+    async def run():
+        session = aiohttp.ClientSession()
+        ws = await session.ws_connect(f"http://127.0.0.1:{service.server.port}/")
+        try:
+            await ws.send_bytes(encode_message("/vibsynth/notify", (1,), "i"))
+            done = decode_packet((await ws.receive(timeout=5)).data)
+            assert done.address == "/vibsynth/done" and done.args == ("/vibsynth/notify", 1)
+            assert len(osc.notifier) == 1
+            osc.controller.set_knob("intensity", 0.75, channels=(1,))  # pushed by the notifier's thread
+            while True:
+                packet = decode_packet((await ws.receive(timeout=5)).data)
+                for push in [m for m, _ in iter_messages(packet)] if isinstance(packet, Bundle) else [packet]:
+                    if push.address == "/vibsynth/ch/2/intensity" and push.args == (0.75,):
+                        return push.args
+        finally:
+            await ws.close()
+            await session.close()
+
+    try:
+        assert asyncio.run(run()) == (0.75,)
+        for _ in range(100):
+            if len(osc.notifier) == 0:
+                break
+            asyncio.run(asyncio.sleep(0.02))
+        assert len(osc.notifier) == 0  # the subscription ended with the socket
+    finally:
+        service.stop()

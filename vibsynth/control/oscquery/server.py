@@ -154,7 +154,13 @@ class _WsPeer:
         return ("oscquery-ws", self.client.ident)
 
     def send(self, data: bytes) -> bool:
-        return self.server._enqueue(self.client, data)
+        """Queue a reply (on the loop) or a push (``/notify``, ``/monitor``: from their worker threads)."""
+        if threading.current_thread() is self.server._thread:
+            return self.server._enqueue(self.client, data)
+        if self.client.ws.closed:
+            return False
+        self.server.call_in_loop(lambda: self.server._enqueue(self.client, data))
+        return True
 
 
 class OscQueryServer(LoopServer):
@@ -392,6 +398,9 @@ class OscQueryServer(LoopServer):
                     break
         finally:
             self.clients.discard(client)
+            for subscriptions in (self.handler.notifier, self.handler.monitor):
+                if subscriptions is not None:  # a /notify or /monitor sent over this socket ends with it
+                    subscriptions.unsubscribe(peer)
             for path in client.listens:
                 listeners = self._listeners.get(path)
                 if listeners is not None:
