@@ -522,7 +522,7 @@ class VibsynthConfig(SettingsModel):
             if self.vrchat.enabled and target_of(param) == "source" and self.layout is None:
                 raise cross_problem(
                     f"vrchat.parameters[{i}] drives source {param.source}: sources need a layout "
-                    "(allowed: set layout, e.g. layout: vest-front)",
+                    "(allowed: set layout, e.g. layout: vest16)",
                     "vrchat.parameters",
                     "layout",
                 )

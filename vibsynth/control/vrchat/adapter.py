@@ -120,8 +120,7 @@ def create(
         oscquery.tree.register(bridge)
         oscquery.tree.refresh()
         bridge.on_value = oscquery.server.value_changed
-    discovery = settings.discovery
-    find = (
-        oscquery is not None and discovery.enabled and discovery.advertise and not getattr(args, "no_discovery", False)
-    )
+    # VRChat finds only services advertised on a real interface: browse for it only then (never
+    # multicast for a loopback-only server)
+    find = oscquery is not None and getattr(oscquery, "advertiser", None) is not None
     return VrchatService(bridge, osc_server.handler, settings, find=find)
