@@ -2125,4 +2125,266 @@ namespace Vibsynth
             return string.Format(CultureInfo.InvariantCulture, "VibsynthClient {0}:{1} prefix=\"{2}\"{3}", host, port, prefix, disposed ? " (disposed)" : "");
         }
     }
+
+    // ================================================================== discovery: mDNS + OSCQuery
+
+    /// <summary>An OSCQuery service found on the network (a vibsynth server, or any other).</summary>
+    public sealed class VibsynthService
+    {
+        /// <summary>The mDNS instance name (discovery.name of the server, e.g. "vibsynth on studio-pc").</summary>
+        public string Name { get; internal set; }
+        /// <summary>Its OSCQuery server, e.g. "http://192.168.1.5:9572/".</summary>
+        public string OscQueryUrl { get; internal set; }
+        /// <summary>Where it takes OSC: HOST_INFO's OSC_IP (the service's address when HOST_INFO names none).</summary>
+        public string OscHost { get; internal set; }
+        /// <summary>HOST_INFO's OSC_PORT (0: HOST_INFO did not answer).</summary>
+        public int OscPort { get; internal set; }
+        /// <summary>HOST_INFO's OSC_TRANSPORT ("UDP").</summary>
+        public string OscTransport { get; internal set; }
+
+        public override string ToString()
+        {
+            return string.Format(CultureInfo.InvariantCulture, "{0}: osc {1}://{2}:{3}, oscquery {4}",
+                Name, (OscTransport ?? "UDP").ToLowerInvariant(), OscHost, OscPort, OscQueryUrl);
+        }
+    }
+
+    /// <summary>
+    /// Finds vibsynth servers by mDNS (the _oscjson._tcp services they advertise) and reads each one's
+    /// OSCQuery HOST_INFO for its OSC address, so a client needs no hard-coded port.
+    /// </summary>
+    /// <remarks>
+    /// One-shot mDNS queries (RFC 6762 section 5.1: sent from an ephemeral port, answered by unicast),
+    /// repeated every 250 ms for the timeout; then one HTTP GET of "?HOST_INFO" per service found.
+    /// Blocking: call it from a worker thread (or <see cref="DiscoverAsync"/>), not Unity's main thread.
+    /// </remarks>
+    public static class VibsynthDiscovery
+    {
+        /// <summary>The OSCQuery service type (Vidvox's OSCQueryProposal).</summary>
+        public const string ServiceType = "_oscjson._tcp.local";
+        const int MdnsPort = 5353;
+        const int MaxHostInfo = 65536;
+        static readonly IPAddress MdnsGroup = IPAddress.Parse("224.0.0.251");
+
+        /// <summary>The OSCQuery services that answered within <paramref name="timeout"/>, by name.</summary>
+        public static IList<VibsynthService> Discover(TimeSpan timeout)
+        {
+            var found = Browse(timeout);
+            var services = new List<VibsynthService>();
+            foreach (var entry in found)
+            {
+                var service = new VibsynthService
+                {
+                    Name = entry.Key,
+                    OscQueryUrl = string.Format(CultureInfo.InvariantCulture, "http://{0}:{1}/", entry.Value.Key, entry.Value.Value),
+                    OscHost = entry.Value.Key,
+                    OscTransport = "UDP",
+                };
+                ReadHostInfo(service, timeout);
+                services.Add(service);
+            }
+            services.Sort((a, b) => string.CompareOrdinal(a.Name, b.Name));
+            return services;
+        }
+
+        /// <summary><see cref="Discover"/> on the thread pool.</summary>
+        public static Task<IList<VibsynthService>> DiscoverAsync(TimeSpan timeout)
+        {
+            return Task.Run(() => Discover(timeout));
+        }
+
+        /// <summary>
+        /// A client for the first service whose name contains <paramref name="nameContains"/> (null: any
+        /// service whose HOST_INFO named an OSC port); VibsynthException when none answered.
+        /// </summary>
+        public static VibsynthClient Connect(string nameContains = null, TimeSpan? timeout = null)
+        {
+            foreach (var service in Discover(timeout ?? TimeSpan.FromSeconds(2)))
+            {
+                if (service.OscPort > 0 && (nameContains == null || service.Name.IndexOf(nameContains, StringComparison.Ordinal) >= 0))
+                    return new VibsynthClient(service.OscHost, service.OscPort);
+            }
+            throw new VibsynthException(nameContains == null
+                ? "no OSCQuery service found over mDNS"
+                : "no OSCQuery service named like '" + nameContains + "' found over mDNS");
+        }
+
+        /// <summary>The mDNS query: one question, PTR for the service type, the unicast-response bit set.</summary>
+        internal static byte[] Query()
+        {
+            var bytes = new List<byte> { 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0 };
+            foreach (var label in ServiceType.Split('.'))
+            {
+                bytes.Add((byte)label.Length);
+                bytes.AddRange(Encoding.ASCII.GetBytes(label));
+            }
+            bytes.AddRange(new byte[] { 0, 0, 12, 0x80, 1 });
+            return bytes.ToArray();
+        }
+
+        /// <summary>Instance name -> (address, OSCQuery port), from the answers received within the timeout.</summary>
+        static Dictionary<string, KeyValuePair<string, int>> Browse(TimeSpan timeout)
+        {
+            var instances = new HashSet<string>();
+            var srv = new Dictionary<string, KeyValuePair<string, int>>();
+            var hosts = new Dictionary<string, string>();
+            var senders = new Dictionary<string, string>();
+            using (var socket = new UdpClient(new IPEndPoint(IPAddress.Any, 0)))
+            {
+                var query = Query();
+                var deadline = DateTime.UtcNow + timeout;
+                var nextQuery = DateTime.UtcNow;
+                while (DateTime.UtcNow < deadline)
+                {
+                    if (DateTime.UtcNow >= nextQuery)
+                    {
+                        try { socket.Send(query, query.Length, new IPEndPoint(MdnsGroup, MdnsPort)); }
+                        catch (SocketException) { }
+                        nextQuery = DateTime.UtcNow + TimeSpan.FromMilliseconds(250);
+                    }
+                    var wait = Math.Min((deadline - DateTime.UtcNow).TotalMilliseconds, (nextQuery - DateTime.UtcNow).TotalMilliseconds);
+                    if (wait <= 0 || !socket.Client.Poll((int)(wait * 1000), SelectMode.SelectRead))
+                        continue;
+                    var from = new IPEndPoint(IPAddress.Any, 0);
+                    byte[] packet;
+                    try { packet = socket.Receive(ref from); }
+                    catch (SocketException) { continue; }
+                    try { Parse(packet, from.Address.ToString(), instances, srv, hosts, senders); }
+                    catch (IndexOutOfRangeException) { }  // a truncated answer: skip it
+                    catch (FormatException) { }
+                }
+            }
+            var found = new Dictionary<string, KeyValuePair<string, int>>();
+            string suffix = "." + ServiceType;
+            foreach (var instance in instances)
+            {
+                KeyValuePair<string, int> target;
+                if (!srv.TryGetValue(instance, out target))
+                    continue;
+                string address;
+                if (!hosts.TryGetValue(target.Key, out address))
+                    address = senders[instance];
+                string name = instance.EndsWith(suffix, StringComparison.OrdinalIgnoreCase) ? instance.Substring(0, instance.Length - suffix.Length) : instance;
+                found[name] = new KeyValuePair<string, int>(address, target.Value);
+            }
+            return found;
+        }
+
+        /// <summary>Reads PTR, SRV and A records of one mDNS message (answers and additional records).</summary>
+        internal static void Parse(byte[] p, string sender, HashSet<string> instances,
+            Dictionary<string, KeyValuePair<string, int>> srv, Dictionary<string, string> hosts, Dictionary<string, string> senders)
+        {
+            if (p.Length < 12 || (p[2] & 0x80) == 0)
+                return;  // not a response
+            int questions = (p[4] << 8) | p[5];
+            int records = ((p[6] << 8) | p[7]) + ((p[8] << 8) | p[9]) + ((p[10] << 8) | p[11]);
+            int i = 12;
+            for (int q = 0; q < questions; q++)
+            {
+                ReadName(p, ref i);
+                i += 4;
+            }
+            for (int r = 0; r < records && i < p.Length; r++)
+            {
+                string name = ReadName(p, ref i);
+                int type = (p[i] << 8) | p[i + 1];
+                int length = (p[i + 8] << 8) | p[i + 9];
+                int data = i + 10;
+                if (data + length > p.Length)
+                    throw new IndexOutOfRangeException();
+                if (type == 12 && string.Equals(name, ServiceType, StringComparison.OrdinalIgnoreCase))
+                {
+                    int at = data;
+                    string instance = ReadName(p, ref at);
+                    instances.Add(instance);
+                    senders[instance] = sender;
+                }
+                else if (type == 33 && length >= 7)
+                {
+                    int port = (p[data + 4] << 8) | p[data + 5];
+                    int at = data + 6;
+                    srv[name] = new KeyValuePair<string, int>(ReadName(p, ref at), port);
+                    if (!senders.ContainsKey(name))
+                        senders[name] = sender;
+                }
+                else if (type == 1 && length == 4)
+                {
+                    hosts[name] = string.Format(CultureInfo.InvariantCulture, "{0}.{1}.{2}.{3}", p[data], p[data + 1], p[data + 2], p[data + 3]);
+                }
+                i = data + length;
+            }
+        }
+
+        /// <summary>A (possibly compressed) DNS name at <paramref name="i"/>, dotted, without the root's dot.</summary>
+        static string ReadName(byte[] p, ref int i)
+        {
+            var labels = new List<string>();
+            int at = i, jumps = 0;
+            bool jumped = false;
+            while (true)
+            {
+                int length = p[at];
+                if ((length & 0xC0) == 0xC0)
+                {
+                    if (++jumps > 16)
+                        throw new FormatException("DNS name pointers loop");
+                    int target = ((length & 0x3F) << 8) | p[at + 1];
+                    if (!jumped)
+                        i = at + 2;
+                    jumped = true;
+                    at = target;
+                    continue;
+                }
+                if (length == 0)
+                {
+                    if (!jumped)
+                        i = at + 1;
+                    break;
+                }
+                if (at + 1 + length > p.Length)
+                    throw new IndexOutOfRangeException();
+                labels.Add(Encoding.UTF8.GetString(p, at + 1, length));
+                at += 1 + length;
+            }
+            return string.Join(".", labels);
+        }
+
+        /// <summary>GET url?HOST_INFO (bounded): fills the OSC address; leaves OscPort 0 when it does not answer.</summary>
+        static void ReadHostInfo(VibsynthService service, TimeSpan timeout)
+        {
+            string text;
+            try
+            {
+                var request = (HttpWebRequest)WebRequest.Create(service.OscQueryUrl + "?HOST_INFO");
+                request.Timeout = (int)Math.Max(100, timeout.TotalMilliseconds);
+                request.Proxy = null;
+                using (var response = request.GetResponse())
+                using (var stream = response.GetResponseStream())
+                {
+                    var buffer = new byte[MaxHostInfo];
+                    int total = 0, n;
+                    while (total < buffer.Length && (n = stream.Read(buffer, total, buffer.Length - total)) > 0)
+                        total += n;
+                    text = Encoding.UTF8.GetString(buffer, 0, total);
+                }
+            }
+            catch (WebException)
+            {
+                return;
+            }
+            catch (System.IO.IOException)
+            {
+                return;
+            }
+            var ip = System.Text.RegularExpressions.Regex.Match(text, "\"OSC_IP\"\\s*:\\s*\"([^\"\\\\]*)\"");
+            var port = System.Text.RegularExpressions.Regex.Match(text, "\"OSC_PORT\"\\s*:\\s*(\\d{1,5})");
+            var transport = System.Text.RegularExpressions.Regex.Match(text, "\"OSC_TRANSPORT\"\\s*:\\s*\"([A-Za-z]+)\"");
+            if (ip.Success && ip.Groups[1].Value.Length > 0 && ip.Groups[1].Value != "0.0.0.0")
+                service.OscHost = ip.Groups[1].Value;
+            if (port.Success)
+                service.OscPort = int.Parse(port.Groups[1].Value, CultureInfo.InvariantCulture);
+            if (transport.Success)
+                service.OscTransport = transport.Groups[1].Value;
+        }
+    }
 }

@@ -1,0 +1,54 @@
+"""Run inside a network namespace made by test_csharp_discover.py: serve, then the C# client finds it.
+
+Prints one JSON object: the C# program's ``key=value`` lines (what it discovered over mDNS and read
+over OSCQuery and OSC).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import vibsynth
+from tests.clients.mono import run_mono
+
+NAME = "vibsynth csharp"
+
+
+def main(folder: str, exe: str) -> None:
+    cfg = Path(folder) / "config.yaml"
+    cfg.write_text(
+        "osc: {port: 9570}\nstudio: {enabled: false}\nmidi: {enabled: false}\n"
+        f"discovery: {{name: '{NAME}', interfaces: ['127.0.0.1'], oscquery_port: 9572}}\n"
+    )
+    serve = subprocess.Popen(
+        [sys.executable, "-m", "vibsynth", "serve", "--config", str(cfg), "--output", "null", "--seconds", "60"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert serve.stdout is not None
+        for line in serve.stdout:
+            if line.startswith("oscquery: "):
+                break
+        osc = vibsynth.Client("127.0.0.1", 9570)
+        osc.send("/vibsynth/intensity", 0.375)
+        osc.sync()
+        found: dict[str, str] = {}
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:  # mDNS probing and announcing take a second or two
+            found = run_mono(Path(exe), NAME, check=False)
+            if "intensity" in found:
+                break
+            time.sleep(0.5)
+        print(json.dumps(found))
+    finally:
+        serve.terminate()
+        serve.wait(20)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2])
