@@ -84,8 +84,9 @@ def run_simulated_actuator(name: str, sos: np.ndarray, noise_rms: float, seed: i
 class SimulatedActuator:
     """A simulated actuator in its own process, patched between the measuring process' ports.
 
-    ``PortAudio:out_<channel>`` -> the actuator -> the ``input_index``-th PortAudio input port,
-    connected by a patch-bay client of this process as soon as the ports appear.
+    ``PortAudio:out_<channel>`` -> the actuator -> the ``input_index``-th PortAudio input port
+    (0: none, the actuator's ``out`` is captured by the test), connected by a patch-bay client
+    of this process as soon as the ports appear.
     """
 
     _count = 0
@@ -128,10 +129,11 @@ class SimulatedActuator:
                 ins = sorted((p.name for p in client.get_ports("PortAudio", is_audio=True, is_input=True)), key=order)
                 want = None
                 if len(outs) >= self.channel and len(ins) >= self.input_index:
-                    want = (outs[self.channel - 1], ins[self.input_index - 1])
+                    want = (outs[self.channel - 1], ins[self.input_index - 1] if self.input_index else "")
                 if want is not None and want != connected:
                     client.connect(want[0], f"{self.name}:in")
-                    client.connect(f"{self.name}:out", want[1])
+                    if want[1]:
+                        client.connect(f"{self.name}:out", want[1])
                 connected = want
             except Exception:  # noqa: BLE001 - ports vanish while the child exits
                 connected = None
@@ -145,11 +147,17 @@ class SimulatedActuator:
         self.gaps = int(out.split()[-1]) if out.strip() else -1
 
 
-def calibrate(tmp_path: Path, *extra: str, name: str = "sim") -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, XDG_CONFIG_HOME=str(tmp_path / "config"), HOME=str(tmp_path))
+def env_of(tmp_path: Path) -> dict[str, str]:
+    return dict(os.environ, XDG_CONFIG_HOME=str(tmp_path / "config"), HOME=str(tmp_path))
+
+
+def calibrate(
+    tmp_path: Path, *extra: str, name: str = "sim", out: str | None = None
+) -> subprocess.CompletedProcess[str]:
+    env = env_of(tmp_path)
     cmd = [
         sys.executable, "-m", "vibsynth", "calibrate", "response", "--input", "system:1",
-        "--set", "audio.host_api=JACK", "-o", str(tmp_path / f"{name}.yaml"), *extra,
+        "--set", "audio.host_api=JACK", "-o", out or str(tmp_path / f"{name}.yaml"), *extra,
     ]  # fmt: skip
     if "--channels" not in extra and "--channel" not in extra:
         cmd += ["--channel", "1"]
@@ -238,3 +246,71 @@ if __name__ == "__main__":  # the simulated actuator's process (see SimulatedAct
     run_simulated_actuator(
         _name, np.array([float(v) for v in _sos.split(",")]).reshape(-1, 6), float(_noise), int(_seed)
     )
+
+
+# ------------------------------------------------------------------ calibrated intensity
+#: Three actuators: (resonance Hz, Q, sensitivity dB): +-6 dB apart, resonances an octave apart.
+ACTUATORS = [(45.0, 2.0, -6.0), (65.0, 3.0, 0.0), (100.0, 4.0, 6.0)]
+
+
+def felt(tmp_path: Path, sim: SimulatedActuator, profile: str) -> np.ndarray:
+    """What the actuator does (its ``out``) while ``vibsynth serve`` plays intensity 0.8, balance +1 through it."""
+    from tests.e2e.jackutil import JackCapture
+
+    cmd = [
+        sys.executable, "-m", "vibsynth", "serve", "--seconds", "60", "--no-osc", "--no-midi", "--no-studio",
+        "--set", "audio.host_api=JACK", "--set", f"actuator.profile={profile}", "--set", "actuator.max_boost_db=45",
+        "--set", "knobs.initial_intensity=0.8", "--set", "knobs.initial_balance=1.0",
+        "--set", "discovery.enabled=false",
+    ]  # fmt: skip
+    proc = subprocess.Popen(cmd, env=env_of(tmp_path), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        with JackCapture(seconds=4.0) as cap:
+            deadline = time.monotonic() + 60
+            while not cap.client.get_all_connections(f"{sim.name}:in"):
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    proc.kill()
+                    raise AssertionError(f"serve did not start: {proc.communicate()[0].decode()[-2000:]}")
+                time.sleep(0.05)
+            time.sleep(1.0)  # past the start's fade
+            cap.connect([f"{sim.name}:out"])
+            cap.arm()
+            assert cap.wait(20)
+            return cap.data[:, 0].astype(np.float64)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)
+
+
+def test_three_calibrated_actuators_feel_the_same(jack_ready, tmp_path):
+    from vibsynth.dsp.analysis import analyze
+    from vibsynth.dsp.intensity import intensity_level_db
+    from vibsynth.formats.basis_file import default_basis
+
+    basis = default_basis()
+    rows = []
+    for k, (f0, q, gain) in enumerate(ACTUATORS):
+        sim = SimulatedActuator(resonance_sos(f0, q, gain, 48000.0), noise_rms=1e-5, seed=10 + k)
+        try:
+            proc = calibrate(tmp_path, "--seconds", "2", "--sweeps", "3", "--level", "-24", out=f"coil{k}")
+            assert proc.returncode == 0, proc.stderr
+            sim.input_index = 0
+            raw = felt(tmp_path, sim, "flat")
+            cal = felt(tmp_path, sim, f"coil{k}")
+        finally:
+            sim.close()
+        for name, y in (("uncalibrated", raw), ("calibrated", cal)):
+            a = analyze(y, fs=48000.0, basis=basis)
+            rows.append((k, name, intensity_level_db(y, fs=48000.0), a.balance))
+    for k, name, level, balance in rows:
+        print(f"actuator {ACTUATORS[k]}: {name:12s} 80-200 Hz level {level:7.2f} dB, balance {balance:+.3f}")
+    cal_levels = np.array([r[2] for r in rows if r[1] == "calibrated"])
+    cal_bal = np.array([r[3] for r in rows if r[1] == "calibrated"])
+    raw_levels = np.array([r[2] for r in rows if r[1] == "uncalibrated"])
+    raw_bal = np.array([r[3] for r in rows if r[1] == "uncalibrated"])
+    print(f"uncalibrated: levels {np.ptp(raw_levels):.2f} dB apart, balances {np.ptp(raw_bal):.2f} apart")
+    print(f"calibrated: levels within {np.abs(cal_levels - cal_levels.mean()).max():.3f} dB of their mean, "
+          f"balances within {np.abs(cal_bal - cal_bal.mean()).max():.3f}")  # fmt: skip
+    assert np.abs(cal_levels - cal_levels.mean()).max() <= 0.5
+    assert np.abs(cal_bal - cal_bal.mean()).max() <= 0.1
+    assert np.ptp(raw_levels) > 3.0  # the test can tell: uncalibrated they differ
