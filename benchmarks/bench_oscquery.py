@@ -37,26 +37,16 @@ from types import SimpleNamespace
 from typing import Any
 
 import aiohttp
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from latency_stats import summary_ms  # noqa: E402 - benchmarks/, beside this script
 
 from vibsynth.control.osc.codec import decode_packet, encode_message  # noqa: E402
 
 GAP_S = 0.03
 ADDRESS = "/vibsynth/ch/1/intensity"
-
-
-def _stats(values_ms: list[float]) -> dict[str, float]:
-    a = np.asarray(values_ms)
-    return {
-        "n": int(a.size),
-        "median_ms": round(float(np.median(a)), 3),
-        "p99_ms": round(float(np.percentile(a, 99)), 3),
-        "min_ms": round(float(a.min()), 3),
-        "max_ms": round(float(a.max()), 3),
-    }
 
 
 def start_service(channels: int) -> SimpleNamespace:
@@ -200,7 +190,7 @@ def latency(service: SimpleNamespace, clients: int, trials: int, via: str) -> di
         listeners.close()
         if page is not None:
             page.close()
-    return {**_stats(results), "lost": lost, "clients": clients, "via": via}
+    return {**summary_ms(results), "lost": lost, "clients": clients, "via": via}
 
 
 def tree_cost(service: SimpleNamespace, rounds: int = 30) -> dict[str, float]:
@@ -211,7 +201,7 @@ def tree_cost(service: SimpleNamespace, rounds: int = 30) -> dict[str, float]:
         with urllib.request.urlopen(url, timeout=5) as response:
             size = len(response.read())
         times.append((time.perf_counter() - start) * 1000.0)
-    return {**_stats(times), "bytes": size, "nodes": len(service.query.tree.nodes)}
+    return {**summary_ms(times), "bytes": size, "nodes": len(service.query.tree.nodes)}
 
 
 def main(argv: list[str] | None = None) -> int:

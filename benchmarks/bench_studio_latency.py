@@ -44,21 +44,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from latency_stats import summary_ms  # noqa: E402 - benchmarks/, beside this script
+
 from tests.e2e.oscclient import OscClient  # noqa: E402
 from tests.e2e.studioutil import chromium, wait_for  # noqa: E402
 
 GAP_S = 0.04
-
-
-def _stats(values_ms: list[float]) -> dict[str, float]:
-    a = np.asarray(values_ms)
-    return {
-        "n": int(a.size),
-        "median_ms": round(float(np.median(a)), 3),
-        "p99_ms": round(float(np.percentile(a, 99)), 3),
-        "min_ms": round(float(a.min()), 3),
-        "max_ms": round(float(a.max()), 3),
-    }
 
 
 def start_service(output: str) -> SimpleNamespace:
@@ -199,8 +190,8 @@ def main() -> int:
         "fs": service.engine.fs,
         "trials": args.trials,
         "clock_offset_ms": round(offset, 3),
-        "input_to_engine": _stats(engine_ms),
-        "osc_to_page": _stats(page_ms),
+        "input_to_engine": summary_ms(engine_ms),
+        "osc_to_page": summary_ms(page_ms),
         "machine": (
             f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
         ),
