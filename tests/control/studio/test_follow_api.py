@@ -258,6 +258,10 @@ def test_without_follow_the_panel_says_how_to_start_and_can_start_one(rig):
 def test_a_studio_without_settings_cannot_switch_inputs(rig):
     server, panel, _ = studio_for(rig, settings=False)
     try:
+        registry.detach(rig.controller, rig.follower)
+        state = json.loads(http(server, "GET", "/api/follow")[2])
+        assert state["can_start"] is False and "pick an input" not in state["hint"] and "--follow" in state["hint"]
+        registry.attach(rig.controller, rig.follower)
         status, answer = post(server, {"device": "fake mic"})
         assert status == 409 and "cannot start or switch" in answer["message"]
         assert registry.follower_of(rig.controller) is rig.follower

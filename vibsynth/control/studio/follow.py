@@ -213,7 +213,7 @@ class FollowPanel:
             "running": follower is not None,
             "limits": follow_limits(),
             "can_start": self.settings is not None,
-            "hint": "" if follower is not None else HOW_TO_START,
+            "hint": "" if follower is not None else HOW_TO_START if self.settings is not None else NOT_RUNNING,
             "error": self.last_error,
             "trace_step_s": HISTORY_STEP_S,
             "full": full_trace,
