@@ -74,8 +74,8 @@ Measures, per phase:
   (0.05 s), notes the time, sends "loud", waits ``--gap``; latency = time of the first
   captured sample with |x| > 1e-7 minus the send time. A message waits for the target's next
   cycle, a wait uniform over one period (2.67 ms), so a median of n trials is known to about
-  +-1.96 x 2.67 / (2 sqrt(n)) ms: +-0.19 ms for 30 trials, +-0.09 ms for 800. The idle trials
-  therefore (``--phase stratified``) send at a chosen fraction of the cycle before a cycle
+  +-1.96 x 2.67 / (2 sqrt(n)) ms (95 %): +-0.48 ms for 30 trials, +-0.09 ms for 800. The idle
+  trials therefore (``--phase stratified``) send at a chosen fraction of the cycle before a cycle
   start (predicted from the capture's last cycle), the same fraction for every peer of a round
   and the rounds' fractions spread evenly over the cycle: the wait, the same for any engine,
   then cancels out of the comparison. Each trial also records ``wait`` (send -> the next cycle

@@ -2,8 +2,8 @@
 
 A latency trial waits for the target's next audio cycle, a wait uniform over one cycle
 (2.67 ms at 48 kHz / 128), so a median needs hundreds of trials to be known to 0.1 ms: its
-95 % interval is about +-1.96 x period / (2 sqrt(n)), +-0.19 ms for n = 30 and +-0.09 ms for
-n = 800. The intervals here are
+95 % interval is about +-1.96 x period / (2 sqrt(n)), +-0.48 ms for n = 30 (one standard error
++-0.24) and +-0.09 ms for n = 800. The intervals here are
 
 * :func:`median_ci`: distribution-free (order statistics of a binomial(n, 1/2) count);
 * :func:`paired_bootstrap`: the trials are taken in rounds (one trial of every system per
