@@ -102,3 +102,77 @@ def test_a_config_naming_a_profile_from_another_rate_fails_to_load(tmp_path, mon
     assert load_config(overrides={"actuator.profile": "coil", "audio.rate": 44100}).settings.actuator.profile == "coil"
     with pytest.raises(ConfigError, match="measured at 44100 Hz but audio.rate is 48000 Hz"):
         load_config(overrides={"actuator.profile": "coil", "audio.rate": 48000})
+
+
+class _FakeRing:
+    """An input ring that delivers ``frames_until_loss`` frames, then nothing (the device went away)."""
+
+    def __init__(self, frames_until_loss: int) -> None:
+        from vibsynth.engine.input_ring import BlockStamp
+
+        self.left = frames_until_loss
+        self.frames_read = 0
+        self._stamp = BlockStamp(0, 0.0, 1.0, 0.0, 1.0)
+
+    def stamp(self):
+        return self._stamp
+
+    def skip(self) -> int:
+        return 0
+
+    def read(self, max_frames=None):
+        n = min(4800, self.left)
+        self.left -= n
+        self.frames_read += n
+        return np.zeros((n, 2), dtype=np.float32)
+
+
+class _FakeSource:
+    def __init__(self, ring: _FakeRing) -> None:
+        self.ring = ring
+
+    def status(self):
+        lost = self.ring.left == 0
+        return {
+            "state": "lost" if lost else "open",
+            "device": "system",
+            "reason": "JACK server shut down" if lost else "",
+        }
+
+
+class _FakeEngine:
+    frame_position = 0
+
+    class _core:  # noqa: N801 - stands in for the compiled core
+        @staticmethod
+        def output_stamp():
+            return (0, 0.0, 1.0, 0.0, 1.0)
+
+    def play_buffer(self, samples, *, channels, at_frame):
+        self.played = (samples.size, channels, at_frame)
+        return 1
+
+
+class _FakeOutput:
+    state = "streaming"
+    state_reason = ""
+
+
+def test_an_input_lost_mid_sweep_stops_the_run_with_one_message():
+    from vibsynth.app.calibrate import _record
+
+    ring = _FakeRing(frames_until_loss=48000)  # one second of the stimulus, then the device is gone
+    engine = _FakeEngine()
+    with pytest.raises(InputError, match="input device 'system' was lost during the sweep .JACK server shut down."):
+        _record(engine, _FakeOutput(), _FakeSource(ring), PLAN.stimulus(), 0, FS)
+    assert engine.played[1] == [0]
+
+
+def test_an_output_lost_mid_sweep_stops_the_run():
+    from vibsynth.app.calibrate import _record
+    from vibsynth.errors import DeviceError
+
+    output = _FakeOutput()
+    output.state, output.state_reason = "device lost", "JACK server shut down"
+    with pytest.raises(DeviceError, match="output device was lost during the sweep"):
+        _record(_FakeEngine(), output, _FakeSource(_FakeRing(10**7)), PLAN.stimulus(), 0, FS)

@@ -17,7 +17,7 @@ band-pass: the weighting's half-power band plays the same role.
 :func:`model_iso_curve_db` is a U-shaped *model* of an iso-intensity curve in acceleration
 (``curvature (log2 f / centre)^2`` dB): with :data:`MODEL_ISO_CENTRE_HZ` and
 :data:`MODEL_ISO_CURVATURE_DB` it gives, for the shipped illustrative ``hapcoil-example``
-profile, the paper's 80-200 Hz (80.5-200 Hz). The paper does not publish its Fig. 1b
+profile, the paper's 80-200 Hz (80.0-200.7 Hz). The paper does not publish its Fig. 1b
 numbers: these two constants were fitted to that one fact and are no measurement; a lab
 measures its own curve (``vibsynth lab``, iso-intensity sines) and passes it here.
 No I/O.
