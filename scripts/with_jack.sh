@@ -20,6 +20,9 @@ while [ $# -gt 0 ]; do
 done
 export JACK_DEFAULT_SERVER="vibsynth-$$"
 export JACK_NO_AUDIO_RESERVATION=1
+# Free the registry slots of JACK servers that died uncleanly (8 slots per machine; a killed
+# private server keeps its slot and jackd then refuses: "Too many servers already active").
+python3 "$(dirname "$0")/jack_reclaim.py" || true
 jackd -n "$JACK_DEFAULT_SERVER" -R -d dummy -r "$rate" -p "$period" -P "$playback" -C "$capture" >"/tmp/jackd-$JACK_DEFAULT_SERVER.log" 2>&1 &
 jack_pid=$!
 # Stop the server whatever happens to this script (a killed test run must not leave a

@@ -40,6 +40,23 @@ __all__ = [
 E2E_REQUIRED_ENV = "VIBSYNTH_E2E_REQUIRED"
 
 
+def reclaim_dead_jack_servers() -> list[str]:
+    """Free JACK's registry slots of servers that died uncleanly (scripts/jack_reclaim.py); the names freed.
+
+    A killed private server keeps one of the machine's 8 slots; call this before starting one.
+    """
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "jack_reclaim.py"
+    spec = importlib.util.spec_from_file_location("jack_reclaim", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    freed: list[str] = module.reclaim()
+    return freed
+
+
 def e2e_required() -> bool:
     """True when CI demands the e2e tests run (``VIBSYNTH_E2E_REQUIRED=1``)."""
     return os.environ.get(E2E_REQUIRED_ENV, "") == "1"

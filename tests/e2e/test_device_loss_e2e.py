@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.e2e.jackutil import e2e_required
+from tests.e2e.jackutil import e2e_required, reclaim_dead_jack_servers
 from tests.e2e.oscclient import OscClient as Osc
 from tests.e2e.oscclient import free_udp_port
 
@@ -74,6 +74,7 @@ class JackServer:
 
     def start(self) -> float:
         """Start it; returns the time.monotonic() at which it answers."""
+        reclaim_dead_jack_servers()
         for realtime in (["-R"], []):
             with open(self.log, "a") as log:
                 self.proc = subprocess.Popen(
