@@ -8,6 +8,7 @@ import pytest
 
 from tests.control.clips.helpers import make_clip
 from tests.control.osc.fakes import send
+from tests.control.oscquery.test_tree import check_node
 from tests.control.spatial.rig import Clock, make_mixer
 from vibsynth.control import clips, spatial
 from vibsynth.control.clips.player import ClipPlayer
@@ -175,6 +176,7 @@ def test_the_oscquery_tree_has_avatar_so_vrchat_sends_to_us(handler, ctl, bridge
     tree.register(bridge)
     events = tree.refresh()
     assert ("PATH_ADDED", "/avatar/change") in events and tree.find("/avatar") is not None
+    check_node(tree.find("/avatar").json(tree.context()))  # the proposal's attribute rules, every /avatar node
     param(handler, peer, "Hug", 0.25)
     assert tree.value("/avatar/parameters/Hug", tree.context()) == ("f", [0.25])
 
