@@ -408,19 +408,20 @@ class Follower:
             self.live = LiveValues(**{**self.live.__dict__, **changes})
             self._pending_params = True
 
+    def _set_db(self, field: str, label: str, value: float) -> float:
+        """Check ``value`` against the range of the setting ``follow.<field>``, then make it live."""
+        low, high = bounds_of(f"follow.{field}")
+        checked = check_range(f"follow {label} (dB)", value, float(low or 0.0), float(high or 0.0))
+        self._set_live(**{field: checked})
+        return checked
+
     def set_gain(self, gain_db: float) -> float:
         """Set the gain (dB, ``follow.gain_db``'s range); every route's trim is added to it."""
-        low, high = bounds_of("follow.gain_db")
-        value = check_range("follow gain (dB)", gain_db, float(low or 0.0), float(high or 0.0))
-        self._set_live(gain_db=value)
-        return value
+        return self._set_db("gain_db", "gain", gain_db)
 
     def set_gate(self, gate_db: float) -> float:
         """Set the gate (dB, ``follow.gate_db``'s range) of every route without its own."""
-        low, high = bounds_of("follow.gate_db")
-        value = check_range("follow gate (dB)", gate_db, float(low or 0.0), float(high or 0.0))
-        self._set_live(gate_db=value)
-        return value
+        return self._set_db("gate_db", "gate", gate_db)
 
     def set_focus(self, focus: str) -> str:
         """Set the focus (all, effects, bass, beat) of every route without its own (audio mode)."""
@@ -431,10 +432,7 @@ class Follower:
 
     def set_range(self, range_db: float) -> float:
         """Set the audio mode's loudness range (dB, ``follow.range_db``'s range) of every route without its own."""
-        low, high = bounds_of("follow.range_db")
-        value = check_range("follow range (dB)", range_db, float(low or 0.0), float(high or 0.0))
-        self._set_live(range_db=value)
-        return value
+        return self._set_db("range_db", "range", range_db)
 
     @property
     def gain_db(self) -> float:
