@@ -77,6 +77,7 @@ GLOBAL_METHODS = (
     "stop",
     "follow/gain",
     "follow/gate",
+    "follow/range",
     "follow/focus",
     "follow/get",
 )

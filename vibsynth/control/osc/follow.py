@@ -1,11 +1,12 @@
-"""OSC methods of live Follow: gain, gate and focus, per-channel on/off, read back in setter form.
+"""OSC methods of live Follow: gain, gate, range and focus, per-channel on/off, read back in setter form.
 
 Addresses (docs/osc.md, docs/follow.md "Live")::
 
     /vibsynth/follow/gain   f dB       (follow.gain_db's range)
     /vibsynth/follow/gate   f dB       (follow.gate_db's range)
+    /vibsynth/follow/range  f dB       (follow.range_db's range: the input range spread over the intensity knob)
     /vibsynth/follow/focus  s all|effects|bass|beat
-    /vibsynth/follow/get    s gain|gate|focus   ->  /vibsynth/follow/gain f  (the setter's form)
+    /vibsynth/follow/get    s gain|gate|range|focus   ->  /vibsynth/follow/gain f  (the setter's form)
     /vibsynth/ch/{n}/follow i 1|0      (off: the channel's knobs take over)
     /vibsynth/ch/{n}/get    s follow   ->  /vibsynth/ch/{n}/follow i
 
@@ -30,11 +31,12 @@ __all__ = ["FollowMethods", "FOLLOW_ADDRESSES", "NOT_RUNNING"]
 FOLLOW_ADDRESSES: dict[str, tuple[str, str]] = {
     "follow/gain": ("f", "follow.gain_db"),
     "follow/gate": ("f", "follow.gate_db"),
+    "follow/range": ("f", "follow.range_db"),
     "follow/focus": ("s", "follow.focus"),
     "follow": ("i", "follow.enabled"),
 }
 #: Names ``/vibsynth/follow/get`` answers.
-GET_NAMES = ("gain", "gate", "focus")
+GET_NAMES = ("gain", "gate", "range", "focus")
 
 NOT_RUNNING = "follow is not running (start serve with --follow DEVICE[:CH,...] or --follow FILE.wav; docs/follow.md)"
 
@@ -59,6 +61,7 @@ class FollowMethods:
         return {
             "follow/gain": self.on_gain,
             "follow/gate": self.on_gate,
+            "follow/range": self.on_range,
             "follow/focus": self.on_focus,
             "follow/get": self.on_get,
             "follow": self.on_follow,
@@ -83,6 +86,10 @@ class FollowMethods:
         arg_count(msg, (1,), "gate in dB")
         self._follower().set_gate(number(msg, 0, "gate"))
 
+    def on_range(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
+        arg_count(msg, (1,), "range in dB")
+        self._follower().set_range(number(msg, 0, "range"))
+
     def on_focus(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
         arg_count(msg, (1,), "all, effects, bass or beat")
         self._follower().set_focus(string(msg, 0, "focus"))
@@ -102,7 +109,7 @@ class FollowMethods:
 
     # ------------------------------------------------------------------ queries
     def on_get(self, msg: Message, channels: tuple[int, ...] | None, peer: PeerLike, at_frame: int | None) -> None:
-        arg_count(msg, (1,), "gain, gate or focus")
+        arg_count(msg, (1,), "gain, gate, range or focus")
         name = string(msg, 0, "setting")
         if name not in GET_NAMES:
             raise ParameterError(f"unknown follow setting {name!r}; known: {', '.join(GET_NAMES)}")
@@ -111,8 +118,7 @@ class FollowMethods:
         if name == "focus":
             peer.send(encode_message(address, (follower.focus,), "s"))
         else:
-            value = follower.gain_db if name == "gain" else follower.gate_db
-            peer.send(encode_message(address, (float(value),), "f"))
+            peer.send(encode_message(address, (float(getattr(follower, f"{name}_db")),), "f"))
 
     def reply_channels(self, peer: PeerLike, channels: tuple[int, ...] | None) -> None:
         """Answer ``get follow``: ``/vibsynth/ch/{n}/follow i`` (1 = follows) for each channel asked."""
