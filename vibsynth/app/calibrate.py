@@ -17,6 +17,7 @@ from __future__ import annotations
 import datetime as _dt
 import logging
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -363,6 +364,7 @@ def measure_channels(
     all_inputs = f"{device}:{','.join(str(c) for c in range(1, n_inputs + 1))}"
     source = SoundDeviceInput(all_inputs, fs=fs, host_api=audio.host_api, block_size=audio.block_size, seconds=4.0)
     results: list[CalibrationResult] = []
+    failure: BaseException | None = None
     try:
         output.start()
         source.open()
@@ -396,9 +398,22 @@ def measure_channels(
                     latency_frames=chosen.latency - pre - fraction,
                 )
             )
+    except BaseException as exc:
+        failure = exc
+        raise
     finally:
         source.close()
         output.stop()
+        if not output.shutdown_portaudio():
+            # After a device loss PortAudio/libjack cannot be shut down (their exit-time clean-up
+            # would hang): say what failed as the command line does and end the process here.
+            from vibsynth.engine.supervisor import hard_exit
+
+            reason = (
+                failure if failure is not None else "the audio device was lost at the end of the run; measure again"
+            )
+            print(f"vibsynth: error: {reason}", file=sys.stderr)
+            hard_exit(1)
     return results
 
 
