@@ -30,7 +30,9 @@ Without an action: run the engine like `vibsynth serve` (same flags) and open th
 its Lab tab, where sessions are set up, run and analysed (the URL ends in #lab).
 Sessions are folders under lab.folder (default: the platform data folder's lab/), named
 PARTICIPANT-PROTOCOL-DATE-TIME; give a session by its folder or that name.
-Stimulus sets: 'presets', 'presets:NAME,NAME', 'renders', 'renders:N' or a folder of WAVs.
+Stimulus sets: 'presets', 'presets:NAME,NAME', 'renders', 'renders:N' or a folder of WAVs;
+'sines' or 'sines:F1,F2,...' (8-12 frequencies, 10-1000 Hz) for iso-intensity curves
+(intensity protocol, matched to a 250 Hz reference sine).
 """
 
 _seed = integer_in(0, 2**64 - 1, what="seed")
@@ -65,7 +67,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "same order. Familiarisation pairs (dissimilarity) are marked and are not saved when run.",
     )
     plan.add_argument("protocol", choices=("intensity", "dissimilarity", "resynthesis"))
-    plan.add_argument("--stimuli", required=True, metavar="SET", help="presets, presets:A,B, renders[:N] or a folder")
+    plan.add_argument(
+        "--stimuli",
+        required=True,
+        metavar="SET",
+        help="presets, presets:A,B, renders[:N], sines[:F1,F2,...] or a folder",
+    )
     plan.add_argument("--seed", type=_seed, default=0, help="seed of the order (default 0)")
     plan.add_argument(
         "--familiarisation",
@@ -83,8 +90,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="analyse sessions of one protocol and stimulus set (one participant or many)",
         description="intensity: mean gains and the intensity model (judged intensity vs 80-200 Hz level, R^2); "
         "dissimilarity: the weights w_j (non-negative Lasso, folds fewer than 10 for small sets), R^2 on held-out "
-        "pairs and the MDS map; resynthesis: mean and SD of each version's rating. Unfinished sessions are "
-        "analysed as far as they go.",
+        "pairs and the MDS map; resynthesis: mean and SD of each version's rating; intensity on sines: the "
+        "iso-intensity curve (each participant, mean and SD in dB re the reference sine; --format csv; --plot; "
+        "--profile adds it in acceleration). Unfinished sessions are analysed as far as they go.",
     )
     an.add_argument("sessions", nargs="+", metavar="SESSION", help="session folders or names")
     an.add_argument("--folder", type=Path, help="sessions folder for names (default: lab.folder)")
@@ -92,7 +100,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--splits", type=integer_in(1, 1000), default=100, help="dissimilarity: random 80/20 splits (default 100)"
     )
     an.add_argument("--seed", type=int, default=0, help="dissimilarity: seed of the splits and folds (default 0)")
-    an.add_argument("--plot", type=Path, metavar="FILE.png", help="dissimilarity: write the MDS map (needs matplotlib)")
+    an.add_argument(
+        "--plot",
+        type=Path,
+        metavar="FILE.png",
+        help="dissimilarity: write the MDS map; sines: the iso-intensity curve (needs matplotlib)",
+    )
+    an.add_argument(
+        "--profile",
+        metavar="NAME",
+        help="sines: an actuator profile (measured response) to give the curve in acceleration too",
+    )
     add_format_argument(an)
     add_basis_argument(an)
     add_config_arguments(an)
@@ -187,6 +205,7 @@ def run_sessions(args: argparse.Namespace) -> int:
 
 
 def run_plan(args: argparse.Namespace) -> int:
+    from vibsynth.research.lab.build import sine_parameters
     from vibsynth.research.lab.orders import make_plan
     from vibsynth.research.lab.protocol import LabParameters
     from vibsynth.research.lab.stimuli import REFERENCE_RATE_HZ, load_set
@@ -204,6 +223,8 @@ def run_plan(args: argparse.Namespace) -> int:
         seed=args.seed,
         basis=basis_from_args(args),
     )
+    if stimuli.kind == "sines":
+        params = sine_parameters(args.protocol, params)
     plan = make_plan(
         args.protocol,
         stimuli.ids,
@@ -235,7 +256,11 @@ def run_analyze(args: argparse.Namespace) -> int:
     sessions = _open_sessions(args)
     protocol = sessions[0].protocol
     fmt = output_format(args)
-    if protocol == "intensity":
+    from vibsynth.research.lab.iso import is_sine_session
+
+    if protocol == "intensity" and is_sine_session(sessions[0]):
+        _iso(sessions, args, fmt)
+    elif protocol == "intensity":
         _intensity(sessions, fmt)
     elif protocol == "dissimilarity":
         _dissimilarity(sessions, args, fmt)
@@ -297,6 +322,42 @@ def _intensity(sessions: list[Any], fmt: str) -> None:
     print(f"80-200 Hz level SD: {r.level_sd_before:.2f} dB as played, {r.level_sd_after:.2f} dB after equalisation")
     if len(sessions) > 1:
         _agreement(r, "0.82, SD 0.08")
+
+
+def _iso(sessions: list[Any], args: argparse.Namespace, fmt: str) -> None:
+    from vibsynth.research.lab.iso import iso_curve
+
+    response = None
+    if args.profile:
+        from vibsynth.settings.actuators import load_actuator_profile
+
+        response = load_actuator_profile(args.profile)["response"]
+    curve = iso_curve(sessions, response=response)
+    if args.plot is not None:
+        from vibsynth.research.plots import plot_iso_curve
+
+        plot_iso_curve(curve, args.plot)
+    if fmt == "json":
+        print(json.dumps(curve.to_dict(), indent=2))
+        return
+    if fmt == "csv":
+        sys.stdout.write(curve.to_csv())
+        return
+    print(_who(sessions))
+    columns = [
+        Column("frequency_hz", "Hz", _num(1)),
+        Column("mean_db", "mean dB", _num(2)),
+        Column("sd_db", "SD dB", _num(2)),
+    ]
+    if curve.acceleration_db is not None:
+        columns.append(Column("acceleration_db", "accel. dB", _num(2)))
+    columns += [Column(f"db_{who}", who, _num(2)) for who in curve.labels]
+    emit(curve.rows(), columns, "table")
+    print(
+        f"iso-intensity curve: drive for the intensity of the {curve.reference_hz:g} Hz reference sine, dB re its drive"
+    )
+    if args.plot is not None:
+        print(f"wrote {args.plot}")
 
 
 def _dissimilarity(sessions: list[Any], args: argparse.Namespace, fmt: str) -> None:

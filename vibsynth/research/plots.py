@@ -3,7 +3,8 @@
 * :func:`plot_basis` -- M and V1..V8 over frequency (Fig. 6a);
 * :func:`plot_spectrum` -- measured spectra vs their S1 (and S1:8, S2:8, M) reconstructions (Fig. 6c);
 * :func:`plot_presets` -- presets on the balance axis, with the spectra at the axis' ends;
-* :func:`plot_mds` -- the 2-D perceptual map of a ratings table (Fig. 7).
+* :func:`plot_mds` -- the 2-D perceptual map of a ratings table (Fig. 7);
+* :func:`plot_iso_curve` -- an iso-intensity curve from the lab's sines (Fig. 1b).
 
 Every ``plot_*`` function writes a PNG (atomically) and returns its path; the matching
 ``*_figure`` function builds the :class:`matplotlib.figure.Figure` without saving it (to
@@ -37,6 +38,8 @@ __all__ = [
     "spectrum_figure",
     "presets_figure",
     "mds_figure",
+    "plot_iso_curve",
+    "iso_curve_figure",
 ]
 
 _DPI = 120
@@ -286,5 +289,46 @@ def mds_figure(mds: Any, *, title: str = "") -> Any:
     ax.set_xlabel("MDS dimension 1 (rating units)")
     ax.set_ylabel("MDS dimension 2 (rating units)")
     ax.set_title(title or f"Perceptual space (Procrustes RMS error {mds.procrustes_rms:.3f})")
+    ax.legend(loc="best")
+    return fig
+
+
+def plot_iso_curve(curve: Any, path: str | os.PathLike[str], *, title: str = "") -> Path:
+    """Fig. 1b-style iso-intensity curve.
+
+    Parameters
+    ----------
+    curve : vibsynth.research.lab.iso.IsoCurve
+        Drive (voltage) for equal intensity, dB re the reference sine: the mean with +-1 SD and
+        each participant thin; in acceleration too when the curve has it (a measured response).
+    path : path-like
+    title : str
+    """
+    return _save(iso_curve_figure(curve, title=title), path)
+
+
+@_styled
+def iso_curve_figure(curve: Any, *, title: str = "") -> Any:
+    """The figure of :func:`plot_iso_curve` (one axes, log frequency).
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
+    fig = _new_figure(figsize=(7, 4.5))
+    ax = fig.subplots()
+    f = curve.freqs_hz
+    for row in curve.voltage_db:
+        ax.plot(f, row, color="C3", lw=0.7, alpha=0.35)
+    ax.plot(f, curve.mean_db, "o-", color="C3", lw=2, label=f"input voltage (mean of {len(curve.participants)})")
+    if np.isfinite(curve.sd_db).any():
+        ax.fill_between(f, curve.mean_db - curve.sd_db, curve.mean_db + curve.sd_db, color="C3", alpha=0.15)
+    if curve.acceleration_db is not None:
+        ax.plot(f, curve.acceleration_db, "s-", color="C0", lw=2, label="acceleration (measured response)")
+    ax.axvline(curve.reference_hz, color="0.5", lw=0.8, ls="--")
+    ax.set_xscale("log")
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel(f"level for equal intensity (dB re the {curve.reference_hz:g} Hz reference)")
+    ax.set_title(title or "Iso-intensity curve (direct intensity matching with sines)")
     ax.legend(loc="best")
     return fig

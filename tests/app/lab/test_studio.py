@@ -71,7 +71,7 @@ def test_setup_offers_protocols_sets_and_the_papers_defaults(lab):
     status, data = get(server, "setup")
     assert status == 200
     assert data["protocols"] == ["intensity", "dissimilarity", "resynthesis"]
-    assert [s["value"] for s in data["sets"]] == ["presets", "renders"]
+    assert [s["value"] for s in data["sets"]] == ["presets", "renders", "sines"]
     assert data["defaults"]["familiarisation_pairs"] == 30 and data["defaults"]["gap_s"] == 0.5
     assert data["defaults"]["gain_min"] == 0.2 and data["defaults"]["gain_max"] == 5.0
     assert data["sessions"] == [] and data["state"]["status"] == "idle"
@@ -134,6 +134,10 @@ def test_a_session_runs_through_the_routes_and_pages_are_told(lab, controller):
         ({"familiarisation": "30"}, "familiarisation: expected int"),
         ({"channel": 9}, "channel must be 0 (all) or 1..2"),
         ({"participant": "x" * 5000}, "participant: longer than 4096 characters"),
+        ({"stimuli": "sines:10,20"}, "give 8-12 different frequencies in 10-1000 Hz"),
+        ({"protocol": "intensity", "stimuli": "sines", "reference": "sine:5000"}, "give sine:F with F in 10-1000 Hz"),
+        ({"protocol": "intensity", "stimuli": "sines", "reference": 250}, "reference: expected str"),
+        ({"stimuli": "sines", "protocol": "dissimilarity"}, "use the intensity protocol"),
     ],
 )
 def test_bad_set_up_is_refused_in_one_line_and_writes_nothing(lab, tmp_path, change, message):
@@ -188,3 +192,29 @@ def test_results_after_a_session_and_the_equalised_set(lab, tmp_path):
     assert status == 200 and stored["stimuli"] == 3
     _, data = get(server, "setup")
     assert stored["folder"] in [s["value"] for s in data["sets"]]
+
+
+def test_an_iso_intensity_session_on_sines_and_its_curve(lab, controller):
+    """Sines matched to a 200 Hz reference sine: the slider spans +-24 dB, the results hold the curve."""
+    server, service = lab
+    status, state = post(
+        server, "start", {**START, "protocol": "intensity", "stimuli": "sines", "reference": "sine:200"}
+    )
+    assert status == 200, state
+    assert state["gain_range"] == [1 / 16, 16.0] and state["progress"] == [1, 10]
+    session = service.runner.session
+    folder = session.folder
+    assert session.meta["set"]["reference_hz"] == 200.0
+    truth = {}
+    for _ in range(10):
+        sid = session.next_trial.stimuli[0]
+        f = session.params()[sid]["frequency_hz"]
+        truth[f] = 6.0 * np.log2(f / 200.0) ** 2 / 10  # a U, 0 dB at the reference
+        status, state = post(server, "answer", {"value": float(10 ** (truth[f] / 20))})
+        assert status == 200, state
+    assert state["status"] == "done"
+    status, result = post(server, "analyze", {"folders": [str(folder)]})
+    assert status == 200, result
+    iso = result["iso"]
+    assert iso["reference_hz"] == 200.0 and iso["frequency_hz"] == sorted(truth)
+    assert iso["mean_db"] == pytest.approx([truth[f] for f in sorted(truth)], abs=0.01)

@@ -3,7 +3,8 @@
 Routes (JSON in and out; behind the studio's token, Origin, Host and body-size checks):
 
 ``GET  /ext/lab/setup``           protocols, stimulus sets, defaults, sessions, the run's state
-``POST /ext/lab/start``           ``{protocol, stimuli, folder, participant, seed, familiarisation, channel}``
+``POST /ext/lab/start``           ``{protocol, stimuli, folder, participant, seed, familiarisation, channel,
+                                  reference}``
 ``POST /ext/lab/open``            ``{folder}``: resume a session from its CSV
 ``POST /ext/lab/play``            ``{slot, gain}``: the trial again (pair, stimulus at gain, a slot's version)
 ``POST /ext/lab/play-reference``  the reference (intensity) or the original (resynthesis)
@@ -36,7 +37,7 @@ from vibsynth.errors import InputError, ParameterError, VibsynthError
 from vibsynth.research.lab.build import SessionRequest, new_session
 from vibsynth.research.lab.protocol import MAX_SEED, PROTOCOLS, LabParameters, check_seed
 from vibsynth.research.lab.session import Session, list_sessions, sessions_root
-from vibsynth.research.lab.stimuli import RENDERS_DEFAULT_COUNT, load_set
+from vibsynth.research.lab.stimuli import DEFAULT_SINES_HZ, RENDERS_DEFAULT_COUNT, SINE_REFERENCE_HZ, load_set
 from vibsynth.settings.models_config import Knobs, VibsynthConfig
 from vibsynth.settings.models_lab import Lab
 
@@ -132,6 +133,13 @@ class LabService:
         n_presets = len(self.library.presets()) if self.library is not None else 0
         sets = [{"value": "presets", "label": f"Presets ({n_presets})"}] if n_presets else []
         sets.append({"value": "renders", "label": f"Engine renders ({RENDERS_DEFAULT_COUNT} balances, -1..+1)"})
+        sets.append(
+            {
+                "value": "sines",
+                "label": f"Sines: iso-intensity curve ({len(DEFAULT_SINES_HZ)} from 10 to 1000 Hz vs "
+                f"{SINE_REFERENCE_HZ:g} Hz; intensity protocol)",
+            }
+        )
         sets += [{"value": f, "label": f} for f in folders]
         return {
             "protocols": list(PROTOCOLS),
@@ -154,7 +162,10 @@ class LabService:
         familiarisation = _field(body, "familiarisation", int, required=False)
         channel = _field(body, "channel", int, required=False) or 0
         channels = self._channels(channel)
-        request = SessionRequest(protocol, participant, seed, self.parameters(familiarisation_pairs=familiarisation))
+        reference = (_field(body, "reference", str, required=False) or "").strip() or "noise"
+        request = SessionRequest(
+            protocol, participant, seed, self.parameters(familiarisation_pairs=familiarisation), reference=reference
+        )
         if not self._busy.acquire(blocking=False):
             raise InputError("a session is being prepared")
         try:
@@ -181,6 +192,7 @@ class LabService:
                 basis=self.basis,
                 ceiling_db=self.knobs.ceiling_db,
                 range_db=self.knobs.range_db,
+                limiter_ceiling=self.knobs.limiter_ceiling,
             )
             self._preparing = False
             try:
@@ -260,7 +272,12 @@ class LabService:
         try:
             protocol = sessions[0].protocol
             if protocol == "intensity":
-                return analyze_intensity(sessions).to_dict()
+                from vibsynth.research.lab.iso import is_sine_session, iso_curve
+
+                out = analyze_intensity(sessions).to_dict()
+                if all(is_sine_session(s) for s in sessions):
+                    out["iso"] = iso_curve(sessions).to_dict()
+                return out
             if protocol == "dissimilarity":
                 result = analyze_dissimilarity(sessions, basis=self.basis, n_splits=100, components=False)
                 return result.to_dict()

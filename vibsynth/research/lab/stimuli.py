@@ -56,6 +56,15 @@ __all__ = [
     "StimulusSet",
     "SetSpec",
     "parse_set_spec",
+    "SINE_MIN_HZ",
+    "SINE_MAX_HZ",
+    "SINE_COUNT",
+    "SINE_REFERENCE_HZ",
+    "DEFAULT_SINES_HZ",
+    "parse_sines",
+    "sine",
+    "load_sines",
+    "sine_id",
     "stimulus_id",
     "measure",
     "load_folder",
@@ -89,7 +98,17 @@ ID_RULE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,79}")
 
 Normalise = Literal["std", "band", "none"]
 NORMALISE_MODES: tuple[Normalise, ...] = ("std", "band", "none")
-SetKind = Literal["folder", "presets", "renders"]
+SetKind = Literal["folder", "presets", "renders", "sines"]
+
+#: Iso-intensity sines (the paper's Fig. 1b, direct intensity matching with sines): 8-12
+#: frequencies in 10-1000 Hz, matched to a reference sine (default 250 Hz, Verrillo's most
+#: sensitive frequency); the default set is 10 frequencies log-spaced over the whole range.
+SINE_MIN_HZ, SINE_MAX_HZ = 10.0, 1000.0
+SINE_COUNT = (8, 12)
+SINE_REFERENCE_HZ = 250.0
+DEFAULT_SINES_HZ: tuple[float, ...] = tuple(float(f"{f:.3g}") for f in np.geomspace(SINE_MIN_HZ, SINE_MAX_HZ, 10))
+#: Raised-cosine onset and offset of each sine (no click: its spectrum stays one line).
+SINE_RAMP_S = 0.02
 
 
 @dataclass(frozen=True)
@@ -175,10 +194,13 @@ class SetSpec:
     names: tuple[str, ...] = ()
     count: int = RENDERS_DEFAULT_COUNT
     folder: Path | None = None
+    freqs: tuple[float, ...] = ()
 
     @property
     def text(self) -> str:
         """The spec as typed (canonical)."""
+        if self.kind == "sines":
+            return "sines" if self.freqs == DEFAULT_SINES_HZ else "sines:" + ",".join(f"{f:g}" for f in self.freqs)
         if self.kind == "folder":
             return str(self.folder)
         if self.kind == "renders":
@@ -194,19 +216,23 @@ def parse_set_spec(text: str) -> SetSpec:
     text : str
         ``presets`` (every preset of the library), ``presets:cork,wood`` (those), ``renders``
         (:data:`RENDERS_DEFAULT_COUNT` textures of the engine on a balance grid), ``renders:N``,
-        or a folder of WAV files.
+        ``sines`` (iso-intensity sines at :data:`DEFAULT_SINES_HZ`), ``sines:F1,F2,...``
+        (:func:`parse_sines`), or a folder of WAV files.
 
     Raises
     ------
     ParameterError
-        Empty, a ``renders`` count outside 2..:data:`MAX_STIMULI`, an empty preset list.
+        Empty, a ``renders`` count outside 2..:data:`MAX_STIMULI`, an empty preset list, bad sines.
     """
     spec = text.strip() if isinstance(text, str) else ""
     if not spec or len(spec) > 4096 or "\x00" in spec:
         raise ParameterError(
-            "stimulus set: give 'presets', 'presets:NAME,NAME,...', 'renders', 'renders:N' or a folder"
+            "stimulus set: give 'presets', 'presets:NAME,NAME,...', 'renders', 'renders:N', 'sines', "
+            "'sines:F1,F2,...' or a folder"
         )
     head, _, tail = spec.partition(":")
+    if head == "sines":
+        return SetSpec("sines", freqs=parse_sines(tail) if tail else DEFAULT_SINES_HZ)
     if head == "presets":
         names = tuple(n.strip() for n in tail.split(",") if n.strip()) if tail else ()
         if tail and not names:
@@ -220,6 +246,89 @@ def parse_set_spec(text: str) -> SetSpec:
             count = int(tail)
         return SetSpec("renders", count=count)
     return SetSpec("folder", folder=Path(spec).expanduser())
+
+
+def parse_sines(text: str) -> tuple[float, ...]:
+    """The frequencies of ``sines:F1,F2,...``: :data:`SINE_COUNT` distinct numbers in 10-1000 Hz, sorted.
+
+    Raises
+    ------
+    ParameterError
+        One message saying what is allowed, whatever is wrong (not numbers, too few or too many,
+        outside the range, the same frequency twice).
+    """
+    rule = (
+        f"sines:F1,F2,...: give {SINE_COUNT[0]}-{SINE_COUNT[1]} different frequencies in "
+        f"{SINE_MIN_HZ:g}-{SINE_MAX_HZ:g} Hz, e.g. sines:10,20,40,80,160,250,400,1000"
+    )
+    parts = [p.strip().removesuffix("Hz").removesuffix("hz").strip() for p in text.split(",")]
+    try:
+        freqs = [float(p) for p in parts if len(p) <= 20]
+    except ValueError:
+        raise ParameterError(f"{rule} (got {text[:60]!r})") from None
+    if (
+        len(freqs) != len(parts)
+        or not SINE_COUNT[0] <= len(freqs) <= SINE_COUNT[1]
+        or not all(math.isfinite(f) and SINE_MIN_HZ <= f <= SINE_MAX_HZ for f in freqs)
+        or len({round(f, 3) for f in freqs}) != len(freqs)
+    ):
+        raise ParameterError(f"{rule} (got {text[:60]!r})")
+    return tuple(sorted(round(f, 3) for f in freqs))
+
+
+def sine(freq_hz: float, *, fs: float, seconds: float, amplitude: float = 1.0) -> NDArray[np.float64]:
+    """A sine of peak ``amplitude`` with :data:`SINE_RAMP_S` raised-cosine ramps at both ends.
+
+    Returns
+    -------
+    samples : ndarray, shape (round(seconds * fs),)
+    """
+    if not 0 < freq_hz < fs / 2:
+        raise ParameterError(f"a {freq_hz:g} Hz sine needs a sample rate above {2 * freq_hz:g} Hz, got {fs:g}")
+    n = int(round(seconds * fs))
+    x = amplitude * np.sin(2.0 * np.pi * freq_hz * np.arange(n) / fs)
+    ramp = min(int(round(SINE_RAMP_S * fs)), n // 2)
+    if ramp:
+        window = 0.5 - 0.5 * np.cos(np.pi * np.arange(ramp) / ramp)
+        x[:ramp] *= window
+        x[n - ramp :] *= window[::-1]
+    return np.asarray(x, dtype=np.float64)
+
+
+def sine_id(freq_hz: float) -> str:
+    """A sine's stimulus id: ``sine-250Hz``, ``sine-16.7Hz``."""
+    return f"sine-{freq_hz:g}Hz"
+
+
+def load_sines(
+    freqs: Sequence[float], *, fs: float, seconds: float, amplitude: float = 1.0, basis: Basis | None = None
+) -> StimulusSet:
+    """Iso-intensity sines, all of one peak ``amplitude`` (one drive voltage), in frequency order.
+
+    Parameters
+    ----------
+    freqs : sequence of float
+        Hz (:func:`parse_sines` checks a typed list).
+    fs, seconds : float
+    amplitude : float
+        Peak of every sine (``build`` levels it below the limiter for every allowed gain).
+    basis : Basis, optional
+        When given, each stimulus' params hold what :func:`measure` gives.
+
+    Returns
+    -------
+    set : StimulusSet
+        Kind ``sines``; params ``source`` (``sine``), ``frequency_hz``, ``amplitude``.
+    """
+    stimuli = []
+    for f in freqs:
+        samples = sine(f, fs=fs, seconds=seconds, amplitude=amplitude)
+        params: dict[str, Any] = {"source": "sine", "frequency_hz": float(f), "amplitude": float(amplitude)}
+        if basis is not None:
+            params.update(measure(samples, fs, basis))
+        stimuli.append(Stimulus(sine_id(f), samples, float(fs), params))
+    text = SetSpec("sines", freqs=tuple(float(f) for f in freqs)).text
+    return StimulusSet(text, "sines", tuple(stimuli))
 
 
 # --------------------------------------------------------------------------- measuring
@@ -488,6 +597,8 @@ def load_set(
         The folder or a preset cannot be used (unknown preset names are listed).
     """
     parsed = parse_set_spec(spec) if isinstance(spec, str) else spec
+    if parsed.kind == "sines":
+        return load_sines(parsed.freqs, fs=fs, seconds=seconds)
     if parsed.kind == "folder":
         assert parsed.folder is not None
         return load_folder(parsed.folder, seconds=seconds)

@@ -37,6 +37,8 @@ function el(tag, attrs = {}, ...children) {
   return node;
 }
 
+const SVG_NS = "http://www.w3.org/2000/svg";
+
 function fmt(value, digits = 3) {
   return value === null || value === undefined || Number.isNaN(value) ? "–" : Number(value).toFixed(digits);
 }
@@ -89,6 +91,10 @@ export async function mount(panel, studio) {
     type: "number", id: "lab-familiarisation", "data-testid": "lab-familiarisation", min: "0", max: "1000",
     step: "1", value: "30", "aria-describedby": "lab-fam-help",
   });
+  const reference = el("input", {
+    type: "text", id: "lab-reference", "data-testid": "lab-reference", autocomplete: "off",
+    placeholder: "sine:250", "aria-describedby": "lab-reference-help",
+  });
   const channel = el("select", { id: "lab-channel" });
   const start = el("button", { type: "submit", "data-testid": "lab-start", text: "Start session" });
   const form = el("form", { class: "lab-form", novalidate: true },
@@ -103,6 +109,9 @@ export async function mount(panel, studio) {
     el("p", { class: "help", id: "lab-seed-help", text: "The same seed gives the same trial order." }),
     el("div", { class: "field" }, el("label", { for: "lab-familiarisation", text: "Familiarisation pairs" }), familiarisation),
     el("p", { class: "help", id: "lab-fam-help", text: "Dissimilarity only; not saved. The paper: 30. 0 to skip." }),
+    el("div", { class: "field" }, el("label", { for: "lab-reference", text: "Reference sine" }), reference),
+    el("p", { class: "help", id: "lab-reference-help",
+      text: "Sines (iso-intensity) only: sine:F, default 250 Hz. Type sines:F1,F2,… (8–12, 10–1000 Hz) in Folder for your own frequencies." }),
     el("div", { class: "field" }, el("label", { for: "lab-channel", text: "Actuator" }), channel),
     el("div", { class: "actions" }, start),
   );
@@ -118,6 +127,7 @@ export async function mount(panel, studio) {
       seed: seed.value.trim(),
       familiarisation: Number(familiarisation.value),
       channel: Number(channel.value),
+      reference: reference.value.trim() || null,
     });
     start.disabled = false;
     note.textContent = "";
@@ -390,7 +400,8 @@ export async function mount(panel, studio) {
     const result = await call("analyze", { folders });
     into.replaceChildren();
     if (!result) return;
-    if (result.protocol === "intensity") into.append(...intensityResults(result));
+    if (result.iso) into.append(...isoResults(result.iso));
+    else if (result.protocol === "intensity") into.append(...intensityResults(result));
     else if (result.protocol === "dissimilarity") into.append(...dissimilarityResults(result));
     else into.append(...resynthesisResults(result));
   }
@@ -411,6 +422,50 @@ export async function mount(panel, studio) {
     ];
   }
 
+  function svgFigure(viewBox, cls, label) {
+    const svg = document.createElementNS(SVG_NS, "svg");
+    svg.setAttribute("viewBox", viewBox);
+    svg.setAttribute("class", cls);
+    svg.setAttribute("role", "img");
+    svg.setAttribute("aria-label", label);
+    return svg;
+  }
+
+  // Iso-intensity curve (sines): the drive for equal intensity, dB re the reference sine, per frequency.
+  function isoResults(iso) {
+    const head = ["Hz", "mean dB", "SD dB", ...iso.participants];
+    const rows = iso.frequency_hz.map((f, k) => [fmt(f, 1), fmt(iso.mean_db[k], 2), fmt(iso.sd_db[k], 2),
+      ...iso.voltage_db.map((row) => fmt(row[k], 2))]);
+    const t = table(head, rows);
+    t.dataset.testid = "lab-iso-table";
+    return [
+      el("p", { text: `Iso-intensity curve: drive for the intensity of the ${fmt(iso.reference_hz, 0)} Hz reference sine, ` +
+        `dB re its drive (${iso.participants.length} participant${iso.participants.length === 1 ? "" : "s"}).` }),
+      isoPlot(iso), t,
+    ];
+  }
+
+  function isoPlot(iso) {
+    const ns = SVG_NS;
+    const svg = svgFigure("0 0 400 200", "iso", "Iso-intensity curve: dB re the reference over log frequency");
+    svg.setAttribute("data-testid", "lab-iso-plot");
+    const values = iso.mean_db.filter((v) => v !== null);
+    const lo = Math.min(...values, 0) - 3, hi = Math.max(...values, 0) + 3;
+    const x = (f) => 20 + 360 * Math.log(f / 10) / Math.log(100);
+    const y = (v) => 190 - 180 * (v - lo) / (hi - lo);
+    const points = iso.frequency_hz.map((f, k) => [f, iso.mean_db[k]]).filter(([, v]) => v !== null);
+    const line = document.createElementNS(ns, "polyline");
+    line.setAttribute("points", points.map(([f, v]) => `${x(f).toFixed(1)},${y(v).toFixed(1)}`).join(" "));
+    line.setAttribute("fill", "none");
+    line.setAttribute("stroke", "currentColor");
+    line.setAttribute("stroke-width", "2");
+    const zero = document.createElementNS(ns, "line");
+    Object.entries({ x1: 20, x2: 380, y1: y(0), y2: y(0), stroke: "gray", "stroke-dasharray": "4 3" })
+      .forEach(([a, b]) => zero.setAttribute(a, b));
+    svg.append(zero, line);
+    return el("figure", {}, svg, el("figcaption", { text: "10 Hz … 1000 Hz (log); dashed: the reference's drive." }));
+  }
+
   function dissimilarityResults(r) {
     const out = [el("p", { text: `${r.pairs.length} pairs rated; self-pairs ${fmt(r.self_mean)} (paper: 0.12).` })];
     if (r.fit) {
@@ -424,12 +479,8 @@ export async function mount(panel, studio) {
   }
 
   function mdsMap(mds) {
-    const ns = "http://www.w3.org/2000/svg";
-    const svg = document.createElementNS(ns, "svg");
-    svg.setAttribute("viewBox", "-1.15 -1.15 2.3 2.3");
-    svg.setAttribute("class", "mds");
-    svg.setAttribute("role", "img");
-    svg.setAttribute("aria-label", "MDS map of the ratings (blue) and of the model (red)");
+    const ns = SVG_NS;
+    const svg = svgFigure("-1.15 -1.15 2.3 2.3", "mds", "MDS map of the ratings (blue) and of the model (red)");
     const all = mds.rated.concat(mds.predicted).flat().map(Math.abs);
     const scale = Math.max(...all, 1e-9);
     // Points inside +-0.8 of the +-1.15 view: room for the names around them.
