@@ -18,7 +18,8 @@ render --follow``, a folder of either)::
   the input's last ``latency`` samples are flushed through with silence. An impulse at ``t``
   in the input is a transient at ``t`` in the clip and in the render.
 * **Transients**: a frame with an onset (strength ``s`` in (0, 1]) lifts the intensity to
-  :func:`transient_peak` ``= intensity + s * TRANSIENT_BOOST`` (at most 1), which decays
+  :func:`~vibsynth.dsp.follow.onsets.transient_peak` ``= intensity + s * TRANSIENT_BOOST`` (at
+  most 1, the live follower's lift too), which decays
   linearly in knob units (exponentially in amplitude) back to the curve over
   ``clips.transient_decay_ms``: a clip transient, played the same way by the clip player and by
   ``render --follow``.
@@ -47,7 +48,8 @@ from numpy.typing import NDArray
 
 from vibsynth.app.render import Cue
 from vibsynth.dsp.basis import Basis
-from vibsynth.dsp.follow.offline import PRIME_S, SPLICE_S, _mirror_after, _primer
+from vibsynth.dsp.follow.offline import PRIME_S, SPLICE_S, mirror_after, primer
+from vibsynth.dsp.follow.onsets import transient_peak
 from vibsynth.dsp.follow.params import TrackerParams, default_params
 from vibsynth.dsp.follow.tracker import Tracker
 from vibsynth.dsp.simplify import simplify
@@ -62,14 +64,12 @@ from vibsynth.settings.validation import FixedLocator
 __all__ = [
     "READ_BLOCK_S",
     "MIN_SECONDS",
-    "TRANSIENT_BOOST",
     "OFFLINE_HOP_MS",
     "offline_params",
     "DEFAULT_TOLERANCE_DB",
     "DEFAULT_TOLERANCE_BALANCE",
     "AlignedFrames",
     "FollowStream",
-    "transient_peak",
     "ClipFromAudio",
     "clip_from_audio",
     "FollowRender",
@@ -80,8 +80,6 @@ __all__ = [
 READ_BLOCK_S = 0.25
 #: Shortest input followed (a 1-sample file has nothing to follow).
 MIN_SECONDS = 0.01
-#: Knob units an onset of strength 1 adds to the intensity (10 dB at the default 40 dB range).
-TRANSIENT_BOOST = 0.25
 #: Frame period offline (ms): twice the live default's, still well inside the level's ~20 ms
 #: resolution; it makes the tracker about 1.3 (vibration) to 1.6 (audio) times faster.
 OFFLINE_HOP_MS = 5.0
@@ -96,11 +94,6 @@ Progress = Callable[[int, int], None]
 def offline_params(mode: str = "vibration", focus: str = "all") -> TrackerParams:
     """The tracker's documented defaults for a mode and focus, framed every :data:`OFFLINE_HOP_MS`."""
     return default_params(mode, focus).with_(hop_ms=OFFLINE_HOP_MS)  # type: ignore[arg-type]
-
-
-def transient_peak(intensity: NDArray[np.float64], strength: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Intensity knob an onset lifts the curve to: ``intensity + strength * TRANSIENT_BOOST``, at most 1."""
-    return np.minimum(1.0, np.asarray(intensity) + np.asarray(strength) * TRANSIENT_BOOST)
 
 
 @dataclass(frozen=True)
@@ -294,7 +287,7 @@ class FollowStream:
         tail_len = tracker.latency + tracker.hop
         first = self.reader.read(prime + 3 * splice).mean(axis=1)
         if self.params.mode == "vibration":
-            before, head = _primer(first, prime, splice)
+            before, head = primer(first, prime, splice)
         else:
             before, head = np.zeros(prime), first[:0]
         self._offset = before.size
@@ -308,7 +301,7 @@ class FollowStream:
             yield self._aligned(mono)
             if progress is not None:
                 progress(self.reader.position, self.frames)
-        after = _mirror_after(tail, tail_len) if self.params.mode == "vibration" else np.zeros(tail_len)
+        after = mirror_after(tail, tail_len) if self.params.mode == "vibration" else np.zeros(tail_len)
         yield self._aligned(after)
 
 

@@ -207,7 +207,8 @@ def test_the_snapshot_and_trace_show_the_input_level_gate_and_knobs(make_rig):
 
 
 def test_a_transient_jumps_then_decays_linearly_back_to_the_curve():
-    from vibsynth.control.follow.transients import TRANSIENT_BOOST, TransientEnvelope
+    from vibsynth.control.follow.transients import TransientEnvelope
+    from vibsynth.dsp.follow.onsets import TRANSIENT_BOOST
 
     env = TransientEnvelope(1000.0, 0.04)  # 40 samples of decay
     assert env.value(0.3, 0) == 0.3 and not env.active

@@ -41,7 +41,7 @@ from vibsynth.control.follow.routes import LiveValues, RouteSpec, default_gate_d
 from vibsynth.control.follow.transients import TransientEnvelope
 from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.follow import FOCUSES, Tracker
-from vibsynth.dsp.follow.onsets import FULL_STRENGTH_DB
+from vibsynth.dsp.follow.onsets import FULL_STRENGTH_DB, ONSET_SCALE_FLOOR
 from vibsynth.engine.inputs import InputSource
 from vibsynth.errors import ParameterError, VibsynthError
 from vibsynth.settings.models import bounds_of
@@ -66,8 +66,6 @@ _EPS_INTENSITY = 1e-3
 _EPS_BALANCE = 5e-3
 #: The input's status (device state, meters) is read at most this often.
 _STATUS_EVERY_S = 0.05
-#: The tracker scales an onset's raw strength by max(intensity, this) (dsp/follow/tracker.py).
-ONSET_SCALE_FLOOR = 0.25
 #: Level reported when nothing was tracked yet (dB).
 FLOOR_DB = -200.0
 

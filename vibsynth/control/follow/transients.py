@@ -1,7 +1,8 @@
 """Onsets played live the way the clip player plays a clip's transients (docs/clips.md).
 
 At an onset of strength ``s`` the intensity jumps (no glide) to ``peak = intensity + s *
-TRANSIENT_BOOST`` (at most 1), where live ``intensity`` is the level the onset announces (the
+TRANSIENT_BOOST`` (at most 1: :func:`~vibsynth.dsp.follow.onsets.transient_peak`, the lift offline
+conversion uses too), where live ``intensity`` is the level the onset announces (the
 level path lags the onset path by a few ms: see the follower), then glides linearly back to
 the tracked curve over the decay
 (``clips.transient_decay_ms``); the intensity knob is linear in dB, so this is an exponential
@@ -10,11 +11,9 @@ amplitude decay, as for a clip transient. A new onset during a decay takes over 
 
 from __future__ import annotations
 
-__all__ = ["TRANSIENT_BOOST", "TransientEnvelope"]
+from vibsynth.dsp.follow.onsets import transient_peak
 
-#: Knob units an onset of strength 1 adds to the intensity (10 dB at the default 40 dB range);
-#: the same lift as offline conversion's (``vibsynth clip from-audio``).
-TRANSIENT_BOOST = 0.25
+__all__ = ["TransientEnvelope"]
 
 
 class TransientEnvelope:
@@ -38,7 +37,7 @@ class TransientEnvelope:
 
         ``now``: what the envelope plays at the onset (a running decay), so the peak is never below it.
         """
-        peak = min(1.0, float(intensity) + float(strength) * TRANSIENT_BOOST)
+        peak = float(transient_peak(intensity, strength))
         if now is not None:
             peak = max(peak, float(now))
         self._peak, self._at = peak, int(at_sample)

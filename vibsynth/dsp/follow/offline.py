@@ -3,7 +3,7 @@
 The signal (mono, or several channels mixed to their mean, or each channel on its own) is fed
 block by block to a tracker. Before it, the tracker is primed: in vibration mode with the
 time-reversed first two seconds crossfaded into the signal (a scan is a stationary process cut
-anywhere: the filters and the 30-band windows start settled; see :func:`_primer`), in audio mode with silence (a file
+anywhere: the filters and the 30-band windows start settled; see :func:`primer`), in audio mode with silence (a file
 starts from nothing: a sound at t = 0 is an onset). After it, the same padding on the other side
 lets the last ``latency`` samples reach a frame. Frame times are the frames' ends minus the
 tracker's latency, so a step at time t shows at time t.
@@ -24,7 +24,18 @@ from vibsynth.dsp.follow.vibration import VibrationAnalyzer
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB
 from vibsynth.errors import ParameterError
 
-__all__ = ["FollowResult", "follow", "follow_channels", "window_analysis", "MAX_CHANNELS", "PRIME_S", "OFFLINE_BLOCK"]
+__all__ = [
+    "FollowResult",
+    "follow",
+    "follow_channels",
+    "window_analysis",
+    "primer",
+    "mirror_after",
+    "MAX_CHANNELS",
+    "PRIME_S",
+    "SPLICE_S",
+    "OFFLINE_BLOCK",
+]
 
 #: Input channels accepted by :func:`follow`.
 MAX_CHANNELS = 64
@@ -106,7 +117,7 @@ def _as_channels(x: ArrayLike) -> NDArray[np.float64]:
 SPLICE_S = 0.03
 
 
-def _primer(x: NDArray[np.float64], length: int, splice: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def primer(x: NDArray[np.float64], length: int, splice: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """A stationary lead-in for ``x``, spliced into it by an equal-power crossfade.
 
     A hard join (a reflection's slope kink, an offset's step) puts broadband energy into the
@@ -134,7 +145,7 @@ def _primer(x: NDArray[np.float64], length: int, splice: int) -> tuple[NDArray[n
     return np.asarray(source[:m] + mu, dtype=np.float64), np.asarray(head, dtype=np.float64)
 
 
-def _mirror_after(x: NDArray[np.float64], length: int) -> NDArray[np.float64]:
+def mirror_after(x: NDArray[np.float64], length: int) -> NDArray[np.float64]:
     """``length`` samples after ``x``: its end reflected (zeros beyond its length)."""
     tail = x[-2 : -length - 2 : -1] if x.size > 1 else x[:0]
     return np.concatenate((tail, np.zeros(max(0, length - tail.size))))
@@ -162,8 +173,8 @@ def _run(
     n = x.size
     tail_len = tracker.latency + tracker.hop
     if params.mode == "vibration":
-        before, head = _primer(x, int(round(PRIME_S * fs)), int(round(SPLICE_S * fs)))
-        after = _mirror_after(x, tail_len)
+        before, head = primer(x, int(round(PRIME_S * fs)), int(round(SPLICE_S * fs)))
+        after = mirror_after(x, tail_len)
     else:
         dc = float(x[: int(fs)].mean()) if n else 0.0  # silence at the signal's offset: DC makes no step
         before, head = np.full(int(round(PRIME_S * fs)), dc), x[:0]
@@ -400,11 +411,11 @@ def window_analysis(
     # causal bank's low bands lag it by up to 0.2 s, which would read as a change of t1).
     shift = np.round((an.band_delay_s - an.filter_delay_s) * an.fs / an.hop).astype(np.intp)
     extra = int(max(0, shift.max())) * hop
-    lead, head = _primer(arr, int(round(PRIME_S * fs)), int(round(SPLICE_S * fs)))
+    lead, head = primer(arr, int(round(PRIME_S * fs)), int(round(SPLICE_S * fs)))
     align = (-(lead.size + window + delay)) % hop  # frame ends land on i hop + window + delay
     before = np.concatenate((np.zeros(align), lead))
     arr = np.concatenate((head, arr[head.size :]))
-    after = _mirror_after(arr, delay + hop + extra)
+    after = mirror_after(arr, delay + hop + extra)
     tracker.process(before)
     ends, levels, powers = [], [], []
     for block in [arr[start : start + OFFLINE_BLOCK] for start in range(0, arr.size, OFFLINE_BLOCK)] + [after]:

@@ -17,16 +17,45 @@ from numpy.typing import ArrayLike, NDArray
 
 from vibsynth.dsp.follow.stream import Ring
 
-__all__ = ["OnsetDetector", "ONSET_THRESHOLD_DB", "FULL_STRENGTH_DB"]
+__all__ = [
+    "OnsetDetector",
+    "ONSET_THRESHOLD_DB",
+    "FULL_STRENGTH_DB",
+    "ONSET_SCALE_FLOOR",
+    "TRANSIENT_BOOST",
+    "transient_peak",
+]
 
 #: Rise (dB, weighted over bands) that makes an onset.
 ONSET_THRESHOLD_DB = 9.0
 #: Rise that gives strength 1.
 FULL_STRENGTH_DB = 30.0
+#: The tracker scales an onset's raw strength by ``max(intensity knob, this)`` (a quiet sound's
+#: onsets still play); the live follower divides by the same to recover the rise.
+ONSET_SCALE_FLOOR = 0.25
+#: Knob units an onset of strength 1 lifts the intensity by (10 dB at the default 40 dB range),
+#: live (control/follow/transients.py) and offline (app/follow_offline.py) alike.
+TRANSIENT_BOOST = 0.25
 _SHORT_S = 0.005
 _REFERENCE_S = 0.06
 _REFRACTORY_S = 0.05
 _FLOOR = 1e-20
+
+
+def transient_peak(intensity: ArrayLike, strength: ArrayLike) -> NDArray[np.float64]:
+    """Intensity knob an onset lifts the curve to: ``intensity + strength * TRANSIENT_BOOST``, at most 1.
+
+    Parameters
+    ----------
+    intensity, strength : array_like, broadcastable
+        The curve's intensity knob where the onset lands, and the onset's strength (0..1].
+
+    Returns
+    -------
+    ndarray
+        The peak, same shape as the broadcast inputs (0-d for scalars).
+    """
+    return np.minimum(1.0, np.asarray(intensity, dtype=np.float64) + np.asarray(strength) * TRANSIENT_BOOST)
 
 
 class OnsetDetector:

@@ -31,6 +31,7 @@ from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
 from vibsynth.dsp.follow.audio import AUDIO_RATE_HZ, MIN_AUDIO_RATE_HZ, AudioAnalyzer
 from vibsynth.dsp.follow.frames import TrackFrames
+from vibsynth.dsp.follow.onsets import ONSET_SCALE_FLOOR
 from vibsynth.dsp.follow.params import TrackerParams
 from vibsynth.dsp.follow.stream import Resampler, rate_factors
 from vibsynth.dsp.follow.vibration import VIBRATION_RATE_HZ, LevelMeter, VibrationAnalyzer
@@ -244,7 +245,7 @@ class Tracker:
             level = drive = self._meter(x, in_ends)
         self._input += x.size
         intensity, gate = self._map(level, drive)
-        onset = np.where(gate, strength * np.maximum(intensity, 0.25), 0.0)
+        onset = np.where(gate, strength * np.maximum(intensity, ONSET_SCALE_FLOOR), 0.0)
         if not self.params.transients:
             onset = np.zeros(level.size)
         self.frames_done += ends.size
