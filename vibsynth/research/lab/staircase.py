@@ -120,7 +120,8 @@ def track(start_db: float, stronger: Sequence[bool], *, rule: str = "1u1d", low_
         raise ParameterError(f"unknown staircase rule {rule!r}; choose one of {', '.join(RULES)}")
     downs_needed, _ = RULES[rule]
     level = min(max(float(start_db), low_db), high_db)
-    levels, reversals = [level], []
+    levels: list[float] = [level]
+    reversals: list[float] = []
     direction, run = 0, 0
     for answer in stronger:
         step = next(s for after, s in reversed(STEPS_DB) if len(reversals) >= after)
