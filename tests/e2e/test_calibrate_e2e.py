@@ -48,7 +48,9 @@ def run_simulated_actuator(name: str, sos: np.ndarray, noise_rms: float, seed: i
     """The simulated actuator's process: a JACK client ``name`` (``in`` -> response + noise -> ``out``).
 
     Its main thread only waits on stdin (no other Python thread may hold the GIL the real-time
-    process callback needs); when stdin closes it prints the JACK cycles it missed and exits.
+    process callback needs). ``record N FILE`` records the next N frames of its output (what
+    the skin gets) to ``FILE.npy`` and answers ``recorded GAPS``; when stdin closes it prints
+    the JACK cycles it missed and exits.
     """
     import jack
 
@@ -57,7 +59,8 @@ def run_simulated_actuator(name: str, sos: np.ndarray, noise_rms: float, seed: i
     outport = client.outports.register("out")
     zi = np.zeros((sos.shape[0], 2))
     noise = (noise_rms * np.random.default_rng(seed).standard_normal(1 << 18)).astype(np.float32)
-    state = {"pos": 0, "gaps": 0, "next": None}
+    state: dict = {"pos": 0, "gaps": 0, "next": None, "rec": None, "at": 0}
+    full = threading.Event()  # the main thread waits without the GIL while the callback records
 
     def process(frames: int) -> None:
         nonlocal zi
@@ -69,13 +72,30 @@ def run_simulated_actuator(name: str, sos: np.ndarray, noise_rms: float, seed: i
         pos = state["pos"]
         if pos + frames > noise.size:
             pos = 0
-        outport.get_array()[:] = y + noise[pos : pos + frames]
+        out = outport.get_array()
+        out[:] = y + noise[pos : pos + frames]
         state["pos"] = pos + frames
+        rec = state["rec"]
+        if rec is not None and state["at"] < rec.size:
+            n = min(frames, rec.size - state["at"])
+            rec[state["at"] : state["at"] + n] = out[:n]
+            state["at"] += n
+            if state["at"] == rec.size:
+                full.set()
 
     client.set_process_callback(process)
     client.activate()
     print("ready", flush=True)
-    sys.stdin.read()
+    for line in sys.stdin:
+        _, frames, path = line.split()
+        buf = np.zeros(int(frames), dtype=np.float32)
+        gaps = state["gaps"]
+        full.clear()
+        state["at"], state["rec"] = 0, buf
+        full.wait()
+        state["rec"] = None
+        np.save(path, buf)
+        print(f"recorded {state['gaps'] - gaps}", flush=True)
     client.deactivate()
     client.close()
     print(f"gaps {state['gaps']}", flush=True)
@@ -138,6 +158,15 @@ class SimulatedActuator:
             except Exception:  # noqa: BLE001 - ports vanish while the child exits
                 connected = None
             time.sleep(0.005)
+
+    def record(self, seconds: float, path: Path) -> tuple[np.ndarray, int]:
+        """The actuator's output over the next ``seconds`` (gap-free unless it says so): (samples, missed cycles)."""
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write(f"record {int(seconds * self.fs)} {path}\n")
+        self.proc.stdin.flush()
+        answer = self.proc.stdout.readline().split()
+        assert answer[0] == "recorded", answer
+        return np.load(path).astype(np.float64), int(answer[1])
 
     def close(self) -> None:
         self._stop.set()
@@ -255,8 +284,6 @@ ACTUATORS = [(45.0, 2.0, -6.0), (65.0, 3.0, 0.0), (100.0, 4.0, 6.0)]
 
 def felt(tmp_path: Path, sim: SimulatedActuator, profile: str) -> np.ndarray:
     """What the actuator does (its ``out``) while ``vibsynth serve`` plays intensity 0.8, balance +1 through it."""
-    from tests.e2e.jackutil import JackCapture
-
     cmd = [
         sys.executable, "-m", "vibsynth", "serve", "--seconds", "60", "--no-osc", "--no-midi", "--no-studio",
         "--set", "audio.host_api=JACK", "--set", f"actuator.profile={profile}", "--set", "actuator.max_boost_db=45",
@@ -265,18 +292,16 @@ def felt(tmp_path: Path, sim: SimulatedActuator, profile: str) -> np.ndarray:
     ]  # fmt: skip
     proc = subprocess.Popen(cmd, env=env_of(tmp_path), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
-        with JackCapture(seconds=4.0) as cap:
-            deadline = time.monotonic() + 60
-            while not cap.client.get_all_connections(f"{sim.name}:in"):
-                if proc.poll() is not None or time.monotonic() > deadline:
-                    proc.kill()
-                    raise AssertionError(f"serve did not start: {proc.communicate()[0].decode()[-2000:]}")
-                time.sleep(0.05)
-            time.sleep(1.0)  # past the start's fade
-            cap.connect([f"{sim.name}:out"])
-            cap.arm()
-            assert cap.wait(20)
-            return cap.data[:, 0].astype(np.float64)
+        deadline = time.monotonic() + 60
+        while not sim.patch.get_all_connections(f"{sim.name}:in"):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                proc.kill()
+                raise AssertionError(f"serve did not start: {proc.communicate()[0].decode()[-2000:]}")
+            time.sleep(0.05)
+        time.sleep(1.0)  # past the start's fade
+        y, gaps = sim.record(4.0, tmp_path / f"felt-{profile}.npy")
+        print(f"{profile}: the simulated actuator missed {gaps} JACK cycles while recording")
+        return y
     finally:
         proc.terminate()
         proc.wait(timeout=20)
