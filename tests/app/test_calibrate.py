@@ -176,3 +176,24 @@ def test_an_output_lost_mid_sweep_stops_the_run():
     output.state, output.state_reason = "device lost", "JACK server shut down"
     with pytest.raises(DeviceError, match="output device was lost during the sweep"):
         _record(_FakeEngine(), output, _FakeSource(_FakeRing(10**7)), PLAN.stimulus(), 0, FS)
+
+
+def test_a_measured_iso_curve_moves_the_band_and_keeps_the_response(tmp_path):
+    from vibsynth.app.calibrate import apply_iso_curve
+
+    m = measured()
+    result = CalibrationResult(1, m, PLAN, "jack", "system", 1, latency_frames=0.0)
+    (path,) = write_profiles([result], str(tmp_path / "coil.yaml"), user_dir=tmp_path)
+    before = read_actuator_profile(path)
+    # a lab's curve whose bottom sits at 300 Hz: the band moves up
+    iso_f = np.array([10.0, 30, 100, 300, 1000])
+    iso_db = 6.0 * np.log2(iso_f / 300.0) ** 2
+    doc = apply_iso_curve(path, iso_f, iso_db, source="lab session s1")
+    after = read_actuator_profile(path)
+    assert after.response == before.response and after.provenance["sweeps"] == 3
+    assert after.band_hz[0] > before.band_hz[0] and after.band_hz == doc["band_hz"]
+    assert after.provenance["iso_curve"].startswith("lab session s1")
+    assert max(v for _, v in after.weighting) == pytest.approx(0.0, abs=0.2)
+    with pytest.raises(ParameterError):
+        apply_iso_curve(path, [100.0], [0.0], source="x")
+    assert read_actuator_profile(path).band_hz == after.band_hz  # a bad curve wrote nothing

@@ -41,6 +41,8 @@ __all__ = [
     "profile_path",
     "measure_channels",
     "write_profiles",
+    "profile_band",
+    "apply_iso_curve",
 ]
 
 log = logging.getLogger(__name__)
@@ -164,9 +166,8 @@ def profile_document(result: CalibrationResult, name: str, *, version: str = "")
     provenance says which.
     """
     m = result.measurement
-    weighting, band = device_band(m.freqs, m.response_db)
-    wf = response_freqs(per_octave=PROFILE_POINTS_PER_OCTAVE)
-    wdb = np.clip(np.interp(np.log(wf), np.log(m.freqs), weighting), RESPONSE_POINTS.y_low, 0.0)
+    response = _profile_points(m)
+    weighting, band = profile_band(response)
     lo, hi = CHECK_BAND_HZ
     fs = result.plan.fs
     return {
@@ -176,9 +177,9 @@ def profile_document(result: CalibrationResult, name: str, *, version: str = "")
         "source": "vibsynth calibrate response (exponential sweeps, see docs/calibration.md)",
         "absolute": True,
         "rate": int(round(fs)),
-        "response": _profile_points(m),
-        "weighting": [[round(float(f), 2), round(float(v), 2)] for f, v in zip(wf, wdb, strict=True)],
-        "band_hz": [round(band[0], 1), round(band[1], 1)],
+        "response": response,
+        "weighting": weighting,
+        "band_hz": band,
         "provenance": {
             "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "vibsynth": version,
@@ -436,3 +437,73 @@ def write_profiles(
         atomic_write(path, header + dump_yaml(doc, sort_keys=False, width=120))
         written.append(path)
     return written
+
+
+# ---------------------------------------------------------------------- iso-intensity curves
+def profile_band(
+    response: list[list[float]],
+    iso_freqs: Any = None,
+    iso_db: Any = None,
+    *,
+    within_db: float = BAND_WITHIN_DB,
+) -> tuple[list[list[float]], list[float]]:
+    """A profile's ``weighting`` points and ``band_hz`` from its ``response`` points and an iso-intensity curve.
+
+    Parameters
+    ----------
+    response : list of [Hz, dB]
+        The profile's response.
+    iso_freqs, iso_db : array_like, shape (k,), optional
+        The acceleration felt as equally intense at ``iso_freqs`` Hz (dB, any reference; a lab's
+        iso-intensity sines); None = the model curve.
+    within_db : float
+
+    Returns
+    -------
+    weighting : list of [Hz, dB]
+        On the profile grid, clipped to the profile's dB range.
+    band_hz : [low, high]
+    """
+    pts = np.asarray(response, dtype=np.float64)
+    freqs = response_freqs()
+    r = np.interp(np.log(freqs), np.log(pts[:, 0]), pts[:, 1])
+    weighting, band = device_band(freqs, r, iso_freqs, iso_db, within_db=within_db)
+    wf = response_freqs(per_octave=PROFILE_POINTS_PER_OCTAVE)
+    wdb = np.clip(np.interp(np.log(wf), np.log(freqs), weighting), RESPONSE_POINTS.y_low, 0.0)
+    points = [[round(float(f), 2), round(float(v), 2)] for f, v in zip(wf, wdb, strict=True)]
+    return points, [round(band[0], 1), round(band[1], 1)]
+
+
+def apply_iso_curve(path: str | Path, iso_freqs: Any, iso_db: Any, *, source: str) -> dict[str, Any]:
+    """Re-derive a profile file's weighting and band from a measured iso-intensity curve; write it atomically.
+
+    For the lab's iso-intensity protocol and the studio's "apply to channel": the response is
+    kept, ``weighting``, ``band_hz`` and ``provenance.iso_curve`` (``source``, e.g. the lab
+    session) change.
+
+    Returns
+    -------
+    profile : dict
+        What was written.
+
+    Raises
+    ------
+    ConfigError
+        The file is no valid profile (nothing is written).
+    ParameterError
+        The curve is malformed.
+    """
+    from vibsynth.formats.files import atomic_write
+    from vibsynth.formats.yamlio import dump_yaml
+    from vibsynth.settings.actuators import read_actuator_profile
+
+    target = Path(path)
+    model = read_actuator_profile(target)
+    doc = model.model_dump(exclude_none=True)
+    doc["weighting"], doc["band_hz"] = profile_band([list(p) for p in model.response], iso_freqs, iso_db)
+    provenance = dict(doc.get("provenance") or {})
+    provenance["iso_curve"] = f"{source}, band within {BAND_WITHIN_DB:g} dB"
+    doc["provenance"] = provenance
+    read_back = {"name": target.stem, **{k: v for k, v in doc.items() if k != "name"}}
+    atomic_write(target, dump_yaml(read_back, sort_keys=False, width=120))
+    return read_back
