@@ -247,12 +247,16 @@ def test_a_vrchat_peer_drives_the_vest(vest):
             peer.frame({"Slap": False}, rng)
             marks["slap"] = cap.frame_time_now()
             peer.frame({"Slap": True}, rng)
+            seen = client.status()
+            marks["clip"] = (seen.get("ch16.clip"), seen["vrchat.mapped"], seen["vrchat.errors"], seen["errors"])
 
-        data, start_frame = record(1.0, slap)
+        data, start_frame = record(LOOP_S + 0.5, slap)
         at = marks["slap"] - start_frame
         before, after = rms_db(data[:at, 15]), rms_db(data[at:, 15])
-        print(f"slap: channel 16 {before:.1f} -> {after:.1f} dB, capture gaps {cap.gaps}")
-        assert before == -math.inf and after > -60
+        onset = np.flatnonzero(np.abs(data[at:, 15]) > 0)
+        print(f"slap: clip on channel 16 from {1000 * onset[0] / rate if len(onset) else float('nan'):.1f} ms")
+        print(f"slap: channel 16 {before:.1f} -> {after:.1f} dB, capture gaps {cap.gaps}, status {marks['clip']}")
+        assert before == -math.inf and after > -60 and onset[0] < rate  # the clip starts within a second
 
         # -- /avatar/change resets everything: the resting hand's channels fall silent
         def change() -> None:
