@@ -1247,6 +1247,46 @@ namespace Vibsynth
             if (!releaseMs.HasValue) return Osc.EncodeMessage(address, "", new object[0]);
             return Osc.EncodeMessage(address, "f", new object[] { Check("release (ms)", releaseMs.Value, 0f, MaxGlideMs) });
         }
+
+        // -------------------------------------------------------------- live Follow (serve --follow)
+        // The server holds the ranges (the typed follow: settings) and refuses a value outside them;
+        // Sync() raises the refusal. Here only what no server takes is refused (NaN, an empty name).
+
+        /// <summary>Every followed channel follows the input (true) or plays its knobs again (false).</summary>
+        public void SetFollow(bool on = true)
+        {
+            Send(Prefix + "/ch/*/follow", "i", on ? 1 : 0);
+        }
+
+        /// <summary>One channel follows the input (true) or plays its knobs again (false); the server refuses a channel no route follows into.</summary>
+        public void SetFollow(int channel, bool on = true)
+        {
+            Send(ChannelAddress(channel, "follow"), "i", on ? 1 : 0);
+        }
+
+        /// <summary>Follow's gain in dB, added to the tracked level (the server checks <c>follow.gain_db</c>'s range, −60..60).</summary>
+        public void SetFollowGain(float db)
+        {
+            Send(Prefix + "/follow/gain", "f", Finite("follow gain (dB)", db));
+        }
+
+        /// <summary>Follow's gate in dB: below this input level the output is silent (<c>follow.gate_db</c>'s range, −200..0).</summary>
+        public void SetFollowGate(float db)
+        {
+            Send(Prefix + "/follow/gate", "f", Finite("follow gate (dB)", db));
+        }
+
+        /// <summary>Follow's input range in dB, spread over the intensity knob in audio mode (<c>follow.range_db</c>'s range, 6..120).</summary>
+        public void SetFollowRange(float db)
+        {
+            Send(Prefix + "/follow/range", "f", Finite("follow range (dB)", db));
+        }
+
+        /// <summary>What shakes in audio mode: <c>all</c>, <c>effects</c>, <c>bass</c> or <c>beat</c> (the server refuses another name).</summary>
+        public void SetFollowFocus(string focus)
+        {
+            Send(Prefix + "/follow/focus", "s", CheckName("follow focus", focus));
+        }
     }
 
     // ================================================================== bundles
@@ -1896,6 +1936,53 @@ namespace Vibsynth
 
         /// <summary>The preset a source last got, or null; blocks up to the timeout.</summary>
         public string GetSourcePreset(int source, TimeSpan? timeout = null) { return Wait(GetSourcePresetAsync(source, timeout)); }
+
+        // -------------------------------------------------------------- follow queries
+        // `/vibsynth/follow/get s gain|gate|range|focus`, answered in setter form; a server without
+        // --follow refuses with "follow is not running ..." (VibsynthServerException).
+
+        /// <summary>Follow's gain in dB, as the server holds it.</summary>
+        /// <exception cref="VibsynthServerException">The server refused (e.g. follow is not running).</exception>
+        /// <exception cref="VibsynthTimeoutException">No answer within the timeout.</exception>
+        public Task<float> GetFollowGainAsync(TimeSpan? timeout = null) { return FollowNumber("gain", timeout); }
+
+        /// <summary>Follow's gain in dB; blocks up to the timeout.</summary>
+        public float GetFollowGain(TimeSpan? timeout = null) { return Wait(GetFollowGainAsync(timeout)); }
+
+        /// <summary>Follow's gate in dB (the mode's default while the config leaves it unset).</summary>
+        public Task<float> GetFollowGateAsync(TimeSpan? timeout = null) { return FollowNumber("gate", timeout); }
+
+        /// <summary>Follow's gate in dB; blocks up to the timeout.</summary>
+        public float GetFollowGate(TimeSpan? timeout = null) { return Wait(GetFollowGateAsync(timeout)); }
+
+        /// <summary>Follow's input range in dB (audio mode: the span spread over the intensity knob).</summary>
+        public Task<float> GetFollowRangeAsync(TimeSpan? timeout = null) { return FollowNumber("range", timeout); }
+
+        /// <summary>Follow's input range in dB; blocks up to the timeout.</summary>
+        public float GetFollowRange(TimeSpan? timeout = null) { return Wait(GetFollowRangeAsync(timeout)); }
+
+        /// <summary>Follow's focus: <c>all</c>, <c>effects</c>, <c>bass</c> or <c>beat</c>.</summary>
+        public Task<string> GetFollowFocusAsync(TimeSpan? timeout = null)
+        {
+            return Query(Prefix + "/follow/", "focus", m => m.Count == 1 && m.IsString(0), m => m.GetString(0), timeout);
+        }
+
+        /// <summary>Follow's focus; blocks up to the timeout.</summary>
+        public string GetFollowFocus(TimeSpan? timeout = null) { return Wait(GetFollowFocusAsync(timeout)); }
+
+        /// <summary>Does a channel follow the input (false: its knobs play)?</summary>
+        public Task<bool> GetFollowAsync(int channel = 1, TimeSpan? timeout = null)
+        {
+            return Get(channel, "follow", IsFlag, m => m.GetInt(0) != 0, timeout);
+        }
+
+        /// <summary>Does a channel follow the input? Blocks up to the timeout.</summary>
+        public bool GetFollow(int channel = 1, TimeSpan? timeout = null) { return Wait(GetFollowAsync(channel, timeout)); }
+
+        Task<float> FollowNumber(string name, TimeSpan? timeout)
+        {
+            return Query(Prefix + "/follow/", name, IsNumber1, m => m.GetFloat(0), timeout);
+        }
 
         // -------------------------------------------------------------- server queries
         /// <summary>The server's status pairs (<c>/vibsynth/status</c>).</summary>

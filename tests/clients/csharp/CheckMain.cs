@@ -5,6 +5,7 @@ using System;
 using System.Collections.Generic;
 using System.Globalization;
 using System.Threading;
+using Vibsynth;
 
 static class CheckMain
 {
@@ -37,6 +38,35 @@ static class CheckMain
     }
 
     public static int Int(string text) { return int.Parse(text, Inv); }
+
+    // What a call did: `key=no exception`, or `key.type` and `key.message` of what it threw (a server
+    // refusal also: `key.address`, `key.count` and each `key.error{i}` in order).
+    public static void Report(string key, Action action)
+    {
+        try
+        {
+            action();
+            Say(key, "no exception");
+        }
+        catch (Exception e)
+        {
+            Exception inner = e is AggregateException ? ((AggregateException)e).InnerException : e;
+            var server = inner as VibsynthServerException;
+            if (server != null)
+            {
+                Say(key + ".type", "VibsynthServerException");
+                Say(key + ".address", server.Address);
+                Say(key + ".message", server.ServerMessage);
+                Say(key + ".count", server.Errors.Count);
+                for (int i = 0; i < server.Errors.Count; i++) Say(key + ".error" + i, server.Errors[i]);
+            }
+            else
+            {
+                Say(key + ".type", inner.GetType().Name);
+                Say(key + ".message", inner.Message);
+            }
+        }
+    }
 
     // One observation; floats round-trip exactly ("R"), booleans as true/false, newlines escaped.
     public static void Say(string key, object value)

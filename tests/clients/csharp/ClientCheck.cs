@@ -303,32 +303,7 @@ static class ClientCheck
         }
     }
 
-    static void Report(string key, Action action)
-    {
-        try
-        {
-            action();
-            Say(key, "no exception");
-        }
-        catch (Exception e)
-        {
-            Exception inner = e is AggregateException ? ((AggregateException)e).InnerException : e;
-            var server = inner as VibsynthServerException;
-            if (server != null)
-            {
-                Say(key + ".type", "VibsynthServerException");
-                Say(key + ".address", server.Address);
-                Say(key + ".message", server.ServerMessage);
-                Say(key + ".count", server.Errors.Count);
-                for (int i = 0; i < server.Errors.Count; i++) Say(key + ".error" + i, server.Errors[i]);
-            }
-            else
-            {
-                Say(key + ".type", inner.GetType().Name);
-                Say(key + ".message", inner.Message);
-            }
-        }
-    }
+    static void Report(string key, Action action) { CheckMain.Report(key, action); }
 
     static void Timeout(int closedPort)
     {
