@@ -377,3 +377,34 @@ def test_jack_server_lost_mid_sweep_one_message_no_profile(tmp_path, monkeypatch
     assert len(errors) == 1 and "lost during the sweep" in errors[0], err
     assert "Traceback" not in err
     assert existing.read_bytes() == before
+
+
+def test_channels_all_measures_every_channel_with_its_own_profile(jack_ready, tmp_path):
+    sos = [resonance_sos(50.0, 2.0, -3.0, 48000.0), resonance_sos(120.0, 4.0, 3.0, 48000.0)]
+    sims = [SimulatedActuator(s, noise_rms=1e-4, seed=20 + k, channel=k + 1) for k, s in enumerate(sos)]
+    try:  # both actuators feed input 1 (JACK sums them); one channel plays at a time
+        proc = calibrate(
+            tmp_path,
+            "--channels",
+            "all",
+            "--set",
+            "audio.channels=2",
+            "--seconds",
+            "2",
+            "--sweeps",
+            "3",
+            "--level",
+            "-24",
+            out="vest",
+        )
+    finally:
+        for sim in sims:
+            sim.close()
+    assert proc.returncode == 0, proc.stderr
+    f = np.geomspace(20, 800, 200)
+    folder = tmp_path / "config" / "vibsynth" / "actuators"
+    for k, s in enumerate(sos):
+        pf, pdb, doc = read_profile(folder / f"vest-ch{k + 1}.yaml")
+        err = np.abs(fine_response(pf, pdb, f) - response_db(s, f, 48000.0)).max()
+        print(f"channel {k + 1}: max |error| 20-800 Hz {err:.3f} dB, band {doc['band_hz']}")
+        assert err <= 1.0 and doc["name"] == f"vest-ch{k + 1}" and doc["provenance"]["output_channel"] == k + 1
