@@ -186,3 +186,47 @@ def test_own_frequencies_and_reference_in_the_browser(lab):
     set_up(browser, protocol="intensity", participant="iso7", seed=1, folder="sines:10,20")
     wait(browser, lambda b: "8-12 different frequencies" in b.find_element(*by("lab-error")).text, "the error message")
     assert set(root.iterdir()) == known
+    assert visible(browser, "lab-start")  # the set-up stays, not the last session's end
+
+
+def test_staircase_recovers_the_curve_in_the_browser(lab):
+    """Stronger/weaker answers (lab-stronger, lab-weaker) while a 1-up/1-down staircase per sine sets the level."""
+    from selenium.webdriver.support.expected_conditions import staleness_of
+    from selenium.webdriver.support.ui import Select
+
+    from vibsynth.formats.recordings import read_recording
+    from vibsynth.research.lab.session import Session
+
+    browser, root, tmp = lab
+    Select(visible(browser, "lab-method")).select_by_value("staircase")
+    folder, meta = start(browser, root, protocol="intensity", participant="stair1", seed=21, stimuli="sines")
+    assert meta["method"] == "staircase" and len(meta["plan"]["test"]) == 160
+    rng = np.random.default_rng(21)
+    while not browser.find_element(*by("lab-done")).is_displayed():
+        k, n = progress(browser)
+        assert n == 160 and not browser.find_element(*by("lab-next")).is_displayed()
+        assert not browser.find_elements(*by("lab-answer"))  # no slider: the staircase sets the level
+        visible(browser, "lab-play-reference").click()
+        visible(browser, "lab-play").click()
+        sid = meta["plan"]["test"][k - 1]["stimuli"][0]
+        rec = read_recording(folder / "stimuli" / f"{sid}.wav")
+        f = felt_frequency(rec.samples, rec.fs)
+        with Session.open(folder) as seen:  # what the fingers feel: the drive the staircase plays
+            level = seen.track(sid).next_db
+        felt = level - true_curve_db(f) + rng.normal(0.0, 0.5)
+        button = visible(browser, "lab-stronger" if felt > 0 else "lab-weaker")
+        if k == 5:
+            shot(browser, tmp, "lab-iso-staircase")
+        button.click()
+        wait(browser, lambda b: staleness_of(button)(b) or b.find_element(*by("lab-done")).is_displayed(), "next")
+    rows = read_rows(folder)
+    assert len(rows) == 160 and {r["judgement"] for r in rows} == {"stronger", "weaker"}
+    out = vibsynth("lab", "analyze", str(folder), "--format", "csv")
+    errors = {
+        float(r["frequency_hz"]): float(r["mean_db"]) - true_curve_db(float(r["frequency_hz"]))
+        for r in csv.DictReader(io.StringIO(out))
+    }
+    print("staircase: recovered - true (dB):", {f: round(e, 2) for f, e in errors.items()})
+    assert len(errors) == 10 and all(abs(e) <= TOLERANCE_DB for e in errors.values()), errors
+    back_to_set_up(browser)
+    Select(browser.find_element(*by("lab-method"))).select_by_value("adjustment")

@@ -81,6 +81,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="N",
         help="pairs (default lab.familiarisation_pairs: 30)",
     )
+    plan.add_argument(
+        "--method",
+        choices=("adjustment", "staircase", "staircase-2d1u"),
+        default="adjustment",
+        help="sines: a gain slider (default) or a staircase per sine on stronger/weaker answers (16 trials each)",
+    )
     add_format_argument(plan)
     add_config_arguments(plan)
     plan.set_defaults(func=run_plan)
@@ -205,9 +211,11 @@ def run_sessions(args: argparse.Namespace) -> int:
 
 
 def run_plan(args: argparse.Namespace) -> int:
+    from vibsynth.errors import ParameterError
     from vibsynth.research.lab.build import sine_parameters
     from vibsynth.research.lab.orders import make_plan
     from vibsynth.research.lab.protocol import LabParameters
+    from vibsynth.research.lab.staircase import staircase_plan
     from vibsynth.research.lab.stimuli import REFERENCE_RATE_HZ, load_set
     from vibsynth.settings.config import settings_from_args
     from vibsynth.settings.library import load_library
@@ -225,14 +233,19 @@ def run_plan(args: argparse.Namespace) -> int:
     )
     if stimuli.kind == "sines":
         params = sine_parameters(args.protocol, params)
-    plan = make_plan(
-        args.protocol,
-        stimuli.ids,
-        seed=args.seed,
-        familiarisation=params.familiarisation_pairs,
-        gain_min=params.gain_min,
-        gain_max=params.gain_max,
-    )
+    if args.method != "adjustment":
+        if stimuli.kind != "sines":
+            raise ParameterError("--method staircase matches sines to a reference sine: use --stimuli sines[:F1,...]")
+        plan = staircase_plan(stimuli.ids, seed=args.seed, gain_min=params.gain_min, gain_max=params.gain_max)
+    else:
+        plan = make_plan(
+            args.protocol,
+            stimuli.ids,
+            seed=args.seed,
+            familiarisation=params.familiarisation_pairs,
+            gain_min=params.gain_min,
+            gain_max=params.gain_max,
+        )
     rows = [
         {
             "phase": t.phase,

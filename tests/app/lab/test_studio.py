@@ -218,3 +218,25 @@ def test_an_iso_intensity_session_on_sines_and_its_curve(lab, controller):
     iso = result["iso"]
     assert iso["reference_hz"] == 200.0 and iso["frequency_hz"] == sorted(truth)
     assert iso["mean_db"] == pytest.approx([truth[f] for f in sorted(truth)], abs=0.01)
+
+
+def test_a_staircase_session_is_answered_stronger_or_weaker(lab):
+    server, service = lab
+    body = {**START, "protocol": "intensity", "stimuli": "sines", "method": "staircase"}
+    status, state = post(server, "start", body)
+    assert status == 200, state
+    assert state["method"] == "staircase" and state["progress"] == [1, 160]
+    session = service.runner.session
+    first = session.next_trial
+    assert service.runner._gain == pytest.approx(first.start_gain)  # the staircase's first level
+    assert post(server, "gain", {"gain": 2.0}) == (
+        400,
+        {"message": "the staircase sets the level: answer stronger or weaker"},
+    )
+    assert post(server, "play", {"gain": 2.0})[0] == 400 and post(server, "play", {})[0] == 200
+    assert post(server, "answer", {"judgement": "louder"})[0] == 400
+    status, state = post(server, "answer", {"judgement": "stronger"})
+    assert status == 200 and state["progress"] == [2, 160]
+    row = session.rows[0]
+    assert row["judgement"] == "stronger" and float(row["gain"]) == pytest.approx(first.start_gain, rel=1e-5)
+    post(server, "stop", {})

@@ -217,3 +217,52 @@ def test_the_figure_has_the_mean_and_the_acceleration(tmp_path, basis):
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     for s in sessions:
         s.close()
+
+
+# ------------------------------------------------------------------ the staircase method
+def test_a_staircase_session_finds_the_curve_and_resumes_from_its_csv(tmp_path, basis):
+    from vibsynth.research.lab.session import Session
+
+    request = SessionRequest("intensity", "st1", 5, method="staircase", staircase_trials=16)
+    s = new_session(tmp_path, request, sines(), basis=basis)
+    assert s.total == 160 and s.method == "staircase"
+    rng = np.random.default_rng(5)
+    while not s.complete:
+        sid = s.next_trial.stimuli[0]
+        f = s.params()[sid]["frequency_hz"]
+        level = 20 * np.log10(s.staircase_gain())
+        felt = level - float(verrillo_like(f)) + rng.normal(0, 0.5)
+        # the participant's answer; any value it sends is replaced by the staircase's gain
+        s.record(Answer(value=1.0, judgement="stronger" if felt > 0 else "weaker"), shown_at=T0, answered_at=T0)
+        if s.done == 77:  # a crash: the session resumes where it was, the staircases too
+            s.close()
+            s = Session.open(s.folder, write=True)
+    rows = s.rows
+    assert {r["judgement"] for r in rows} == {"stronger", "weaker"}
+    first = next(r for r in rows if r["stimulus"] == "sine-10Hz")
+    assert float(first["gain"]) == pytest.approx(
+        next(t.start_gain for t in s.plan.test if t.stimuli[0] == "sine-10Hz"), rel=1e-5
+    )
+    curve = iso_curve([s])
+    error = curve.mean_db - verrillo_like(curve.freqs_hz)
+    assert np.max(np.abs(error)) < 2.0, error
+    s.close()
+    with pytest.raises(ParameterError, match="answer stronger or weaker"):
+        t = new_session(tmp_path, SessionRequest("intensity", "st2", 5, method="staircase"), sines(), basis=basis)
+        t.record(Answer(value=1.0), shown_at=T0, answered_at=T0)
+    t.close()
+
+
+def test_the_staircase_is_for_sines_and_known_methods(tmp_path, basis):
+    from vibsynth.research.lab.stimuli import load_renders
+
+    renders = load_renders(3, fs=4000, seconds=1.0, seed=1, basis=basis)
+    with pytest.raises(ParameterError, match="use a set of sines"):
+        new_session(tmp_path, SessionRequest("intensity", "p1", 1, method="staircase"), renders, basis=basis)
+    with pytest.raises(ParameterError, match="unknown method 'bisection'"):
+        SessionRequest("intensity", "p1", 1, method="bisection")
+    with pytest.raises(ParameterError, match="trials per sine must be 6..60"):
+        new_session(
+            tmp_path, SessionRequest("intensity", "p1", 1, method="staircase", staircase_trials=1), sines(), basis=basis
+        )
+    assert not tmp_path.exists() or list(tmp_path.iterdir()) == []

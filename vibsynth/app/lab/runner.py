@@ -175,6 +175,7 @@ class LabRunner:
                     ],
                     "slots": len(self._trial.slots) if self._trial is not None else 0,
                     "gain_range": [params.gain_min, params.gain_max],
+                    "method": s.method,
                     "start": self._start_value(),
                     "participant": s.participant,
                     "playing_s": max(0.0, (self._playing_until - self.engine.frame_position) / self.engine.fs),
@@ -233,6 +234,15 @@ class LabRunner:
             self._show()
         self._changed()
         return self.state()
+
+    def clear_done(self) -> None:
+        """Forget the finished session (a new one is being set up: the page shows the set-up, not its end)."""
+        with self._lock:
+            if not self.running:
+                self._done_folder = ""
+                if self._phase == "done":
+                    self._close_session()
+                    self._phase = "idle"
 
     def stop(self) -> dict[str, Any]:
         """End the run now (the session stays resumable from its CSV); the texture is unmuted."""
@@ -299,6 +309,8 @@ class LabRunner:
         self._plays = self._reference_plays = 0
         self._slot_plays = {}
         self._gain = self._trial.start_gain if self._trial and self._trial.start_gain else 1.0
+        if s.method != "adjustment" and self._phase == "test":
+            self._gain = s.staircase_gain()  # the staircase sets the level from the answers so far
         if s.protocol == "resynthesis":
             self._play_reference()
         else:
@@ -400,6 +412,7 @@ class LabRunner:
         with self._lock:
             self._require_trial()
             if gain is not None:
+                self._refuse_gain_in_staircase()
                 self._gain = self._check_gain(gain)
             self._play_trial(slot)
         self._changed()
@@ -417,9 +430,14 @@ class LabRunner:
         """The intensity slider moved: the stimulus plays on at the new gain (a 10 ms glide)."""
         with self._lock:
             self._require_trial()
+            self._refuse_gain_in_staircase()
             self._gain = self._check_gain(gain)
             if self._stimulus_playing and self._playing_until > self.engine.frame_position:
                 self.engine.set_buffer_gain(self._gain, channels=self._channels, glide_s=0.01)
+
+    def _refuse_gain_in_staircase(self) -> None:
+        if self._session is not None and self._session.method != "adjustment":
+            raise ParameterError("the staircase sets the level: answer stronger or weaker")
 
     def _check_gain(self, gain: float) -> float:
         assert self._session is not None
@@ -431,7 +449,9 @@ class LabRunner:
             raise ParameterError(f"gain = {gain:g} is outside [{p.gain_min:g}, {p.gain_max:g}]")
         return min(max(float(gain), p.gain_min), p.gain_max)
 
-    def answer(self, *, value: float | None = None, ratings: Mapping[int, float] | None = None) -> dict[str, Any]:
+    def answer(
+        self, *, value: float | None = None, ratings: Mapping[int, float] | None = None, judgement: str | None = None
+    ) -> dict[str, Any]:
         """Record the answer (data trials; familiarisation answers are not saved) and show the next trial.
 
         Parameters
@@ -440,6 +460,8 @@ class LabRunner:
             Intensity: the gain; dissimilarity: the rating 0..1.
         ratings : mapping of int to float
             Resynthesis: slot (1..5) -> rating 0..1.
+        judgement : str
+            An intensity staircase: ``stronger`` or ``weaker`` (the stimulus vs the reference).
 
         Raises
         ------
@@ -453,7 +475,9 @@ class LabRunner:
             s, t = self._session, self._trial
             assert s is not None and t is not None
             answered_at = self.clock()
-            if s.protocol == "intensity" and value is not None:
+            if s.method != "adjustment":
+                value = self._gain
+            elif s.protocol == "intensity" and value is not None:
                 value = self._check_gain(value)
             if s.protocol == "resynthesis":
                 if ratings is None or sorted(ratings) != list(range(1, len(t.slots) + 1)):
@@ -463,7 +487,9 @@ class LabRunner:
                     ratings=by_version, slot_plays=dict(self._slot_plays), reference_plays=self._reference_plays
                 )
             else:
-                answer = Answer(value=value, plays=self._plays, reference_plays=self._reference_plays)
+                answer = Answer(
+                    value=value, plays=self._plays, reference_plays=self._reference_plays, judgement=judgement
+                )
             if self._phase == "test":
                 try:
                     s.record(answer, shown_at=self._shown_at or answered_at, answered_at=answered_at)

@@ -4,12 +4,12 @@ Routes (JSON in and out; behind the studio's token, Origin, Host and body-size c
 
 ``GET  /ext/lab/setup``           protocols, stimulus sets, defaults, sessions, the run's state
 ``POST /ext/lab/start``           ``{protocol, stimuli, folder, participant, seed, familiarisation, channel,
-                                  reference}``
+                                  reference, method}``
 ``POST /ext/lab/open``            ``{folder}``: resume a session from its CSV
 ``POST /ext/lab/play``            ``{slot, gain}``: the trial again (pair, stimulus at gain, a slot's version)
 ``POST /ext/lab/play-reference``  the reference (intensity) or the original (resynthesis)
 ``POST /ext/lab/gain``            ``{gain}``: the slider moved (the stimulus plays on at it)
-``POST /ext/lab/answer``          ``{value}`` or ``{ratings: {slot: rating}}``; shows the next trial
+``POST /ext/lab/answer``          ``{value}``, ``{ratings: {slot: rating}}`` or ``{judgement}`` (staircase); next trial
 ``POST /ext/lab/pause``, ``/resume``, ``/stop``
 ``GET  /ext/lab/state``           the run's state (never a stimulus' name)
 ``POST /ext/lab/analyze``         ``{folders}``: one or more sessions' results
@@ -163,14 +163,21 @@ class LabService:
         channel = _field(body, "channel", int, required=False) or 0
         channels = self._channels(channel)
         reference = (_field(body, "reference", str, required=False) or "").strip() or "noise"
+        method = _field(body, "method", str, required=False) or "adjustment"
         request = SessionRequest(
-            protocol, participant, seed, self.parameters(familiarisation_pairs=familiarisation), reference=reference
+            protocol,
+            participant,
+            seed,
+            self.parameters(familiarisation_pairs=familiarisation),
+            reference=reference,
+            method=method,
         )
         if not self._busy.acquire(blocking=False):
             raise InputError("a session is being prepared")
         try:
             if self.runner.running:
                 raise InputError("a session is already running: stop it first")
+            self.runner.clear_done()  # a failed start shows the set-up again, not the last session's end
             self._preparing = True
             self._publish(self.state())
             p = request.parameters
@@ -243,6 +250,9 @@ class LabService:
         return self.runner.play(slot=slot, gain=gain)
 
     def answer(self, body: dict[str, Any]) -> dict[str, Any]:
+        judgement = _field(body, "judgement", str, required=False)
+        if judgement is not None:
+            return self.runner.answer(judgement=judgement[:20])
         ratings = _field(body, "ratings", dict, required=False)
         if ratings is not None:
             parsed: dict[int, float] = {}

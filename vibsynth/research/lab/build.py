@@ -19,6 +19,7 @@ from vibsynth.limits import VOICE_GAIN_MAX
 from vibsynth.research.lab.orders import Plan, make_plan
 from vibsynth.research.lab.protocol import LabParameters, check_participant, check_protocol, check_seed
 from vibsynth.research.lab.session import Session
+from vibsynth.research.lab.staircase import TRIALS_PER_SINE, check_method, staircase_plan
 from vibsynth.research.lab.stimuli import (
     NORMALISE_MODES,
     SINE_MAX_HZ,
@@ -75,6 +76,11 @@ class SessionRequest:
         reference sine of F Hz), and ``noise`` (the default) means a :data:`SINE_REFERENCE_HZ` sine.
     repetitions : int
         Intensity: adjustments per stimulus.
+    method : str
+        Intensity on sines: ``adjustment`` (the slider), ``staircase`` (1-up/1-down on
+        stronger/weaker answers) or ``staircase-2d1u`` (:mod:`~vibsynth.research.lab.staircase`).
+    staircase_trials : int
+        Trials of each sine's staircase.
     """
 
     protocol: str
@@ -84,8 +90,11 @@ class SessionRequest:
     normalise: str | None = None
     reference: str = "noise"
     repetitions: int = 1
+    method: str = "adjustment"
+    staircase_trials: int = TRIALS_PER_SINE
 
     def __post_init__(self) -> None:
+        check_method(self.method)
         check_protocol(self.protocol)
         check_participant(self.participant)
         check_seed(self.seed)
@@ -182,6 +191,8 @@ def new_session(
     protocol = check_protocol(request.protocol)
     if stimulus_set.kind == "sines":
         p, prepared, played, reference, set_info = _sines(request, stimulus_set, basis, limiter_ceiling)
+    elif request.method != "adjustment":
+        raise ParameterError("the staircase matches sines to a reference sine: use a set of sines (sines[:F1,F2,...])")
     else:
         p = request.parameters
         minimum = 2 if protocol == "dissimilarity" else 1
@@ -210,15 +221,20 @@ def new_session(
             "normalise": mode,
             "level_db": level,
         }
-    plan: Plan = make_plan(
-        protocol,
-        prepared.ids,
-        seed=request.seed,
-        familiarisation=p.familiarisation_pairs,
-        gain_min=p.gain_min,
-        gain_max=p.gain_max,
-        repetitions=request.repetitions,
-    )
+    if request.method != "adjustment":
+        plan: Plan = staircase_plan(
+            prepared.ids, seed=request.seed, gain_min=p.gain_min, gain_max=p.gain_max, trials=request.staircase_trials
+        )
+    else:
+        plan = make_plan(
+            protocol,
+            prepared.ids,
+            seed=request.seed,
+            familiarisation=p.familiarisation_pairs,
+            gain_min=p.gain_min,
+            gain_max=p.gain_max,
+            repetitions=request.repetitions,
+        )
     return Session.create(
         root,
         protocol=protocol,
@@ -232,6 +248,7 @@ def new_session(
         reference=reference.id if reference is not None else None,
         originals=prepared.ids,
         folder=folder,
+        method=request.method,
     )
 
 

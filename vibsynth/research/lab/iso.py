@@ -3,8 +3,9 @@
 Each participant matched every sine's intensity to a reference sine (default 250 Hz) by its
 gain; a sine and the reference are generated at one drive level, so the gain *is* the drive
 (voltage) that feels as intense as the reference: ``20 log10(gain)`` dB re the reference's
-drive. Repetitions are averaged in dB (geometric mean of gains), participants too (the
-paper's geometric mean), with their SD. With an actuator's measured response ``R(f)``
+drive. A staircase session gives each sine's staircase estimate instead
+(:mod:`~vibsynth.research.lab.staircase`). Repetitions are averaged in dB (geometric mean of
+gains), participants too (the paper's geometric mean), with their SD. With an actuator's measured response ``R(f)``
 (acceleration per unit drive, dB), the same curve in acceleration is
 ``V(f) + R(f) - R(f_ref)`` (dB re the reference's acceleration): the curve
 :func:`vibsynth.dsp.measure_band.device_band` takes.
@@ -168,6 +169,9 @@ def iso_curve(sessions: Sequence[Session], *, response: ArrayLike | None = None)
     freqs = np.array([float(params[sid]["frequency_hz"]) for sid in result.ids])
     order = np.argsort(freqs)
     voltage = 20.0 * np.log10(result.gains[:, order])
+    for k, session in enumerate(sessions):
+        if session.method != "adjustment":  # the staircase's estimate, not the mean of the gains it played
+            voltage[k] = [session.track(result.ids[j]).estimate_db for j in order]
     with np.errstate(all="ignore"):
         import warnings
 

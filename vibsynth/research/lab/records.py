@@ -17,7 +17,17 @@ from vibsynth.errors import ParameterError
 from vibsynth.research.lab.orders import Trial
 from vibsynth.research.lab.protocol import VERSIONS, Protocol
 
-__all__ = ["MAX_PLAYS", "Answer", "columns", "make_row", "check_row", "timestamp", "parse_timestamp", "stimulus_file"]
+__all__ = [
+    "MAX_PLAYS",
+    "JUDGEMENTS",
+    "Answer",
+    "columns",
+    "make_row",
+    "check_row",
+    "timestamp",
+    "parse_timestamp",
+    "stimulus_file",
+]
 
 #: Plays of one sound counted per trial, at most (a stuck key cannot grow a number without bound).
 MAX_PLAYS = 10_000
@@ -65,8 +75,15 @@ _COLUMNS: dict[str, tuple[str, ...]] = {
 }
 
 
-def columns(protocol: Protocol) -> tuple[str, ...]:
-    """The CSV header of a protocol."""
+#: A staircase session's extra column: the participant's judgement of the test sine vs the reference.
+JUDGEMENTS = ("stronger", "weaker")
+
+
+def columns(protocol: Protocol, method: str = "adjustment") -> tuple[str, ...]:
+    """The CSV header of a protocol (an intensity staircase adds ``judgement`` before the timestamps)."""
+    if protocol == "intensity" and method != "adjustment":
+        head = _COLUMNS[protocol][: -len(_COMMON_TAIL)]
+        return head + ("judgement",) + _COMMON_TAIL
     return _COLUMNS[protocol]
 
 
@@ -103,6 +120,9 @@ class Answer:
         Resynthesis: plays of each version.
     reference_plays : int
         Plays of the reference (intensity: the equalisation reference; resynthesis: the original).
+    judgement : str or None
+        An intensity staircase: ``stronger`` or ``weaker`` (the test sine vs the reference); its
+        ``value`` is then the gain the test sine played at.
     """
 
     value: float | None = None
@@ -110,6 +130,7 @@ class Answer:
     plays: int = 1
     slot_plays: Mapping[str, int] = field(default_factory=dict)
     reference_plays: int = 0
+    judgement: str | None = None
 
 
 def _number(name: str, value: object, low: float, high: float) -> float:
@@ -141,6 +162,7 @@ def make_row(
     participant: str,
     gain_range: tuple[float, float] = (0.2, 5.0),
     reference: str = "reference",
+    method: str = "adjustment",
 ) -> dict[str, str]:
     """The CSV row of an answered trial, validated.
 
@@ -159,6 +181,8 @@ def make_row(
         Intensity: the allowed gains.
     reference : str
         Intensity: the reference's id.
+    method : str
+        Intensity: ``adjustment`` or a staircase (the row then has the ``judgement``).
 
     Returns
     -------
@@ -197,6 +221,10 @@ def make_row(
             "t1": _fmt(p["t1"]),
             "reference": reference,
         }
+        if method != "adjustment":
+            if answer.judgement not in JUDGEMENTS:
+                raise ParameterError(f"answer stronger or weaker, got {str(answer.judgement)[:20]!r}")
+            row["judgement"] = answer.judgement
     elif protocol == "dissimilarity":
         rating = _number("rating", answer.value, 0.0, 1.0)
         a, b = trial.stimuli
@@ -233,7 +261,7 @@ def make_row(
             }
         )
     row.update(common)
-    return {c: row[c] for c in columns(protocol)}
+    return {c: row[c] for c in columns(protocol, method)}
 
 
 def check_row(protocol: Protocol, row: Mapping[str, str], trial: Trial) -> None:
@@ -252,6 +280,8 @@ def check_row(protocol: Protocol, row: Mapping[str, str], trial: Trial) -> None:
         gain = float(row["gain"])
         if not (math.isfinite(gain) and gain > 0):
             raise ValueError(f"gain {row['gain']} is not a positive number")
+        if "judgement" in row and row["judgement"] not in JUDGEMENTS:
+            raise ValueError(f"judgement {row['judgement'][:20]!r} is neither stronger nor weaker")
     elif protocol == "dissimilarity":
         ids = (row["stimulus_a"], row["stimulus_b"])
         files = (row["file_a"], row["file_b"])

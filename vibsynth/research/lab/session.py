@@ -20,10 +20,11 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import os
 import shutil
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -41,6 +42,7 @@ from vibsynth.research.lab.protocol import (
     check_seed,
 )
 from vibsynth.research.lab.records import Answer, check_row, columns, make_row, parse_timestamp, timestamp
+from vibsynth.research.lab.staircase import METHODS, Track, check_method, rule_of, track
 from vibsynth.research.lab.stimuli import Stimulus
 
 if TYPE_CHECKING:
@@ -227,6 +229,34 @@ class Session:
         return LabParameters(**self.meta["parameters"])
 
     @property
+    def method(self) -> str:
+        """``adjustment`` (the slider), or ``staircase``/``staircase-2d1u`` (intensity on sines)."""
+        return str(self.meta.get("method") or "adjustment")
+
+    def track(self, stimulus: str) -> Track:
+        """A staircase session: the staircase of one stimulus after the answers so far.
+
+        Its start is the gain the plan gives that stimulus' first trial; levels are dB of gain.
+        """
+        start = next(t.start_gain for t in self.plan.test if t.stimuli[0] == stimulus and t.start_gain)
+        answers = [r["judgement"] == "stronger" for r in self.rows if r["stimulus"] == stimulus]
+        p = self.parameters
+        return track(
+            20.0 * math.log10(start),
+            answers,
+            rule=rule_of(self.method),
+            low_db=20.0 * math.log10(p.gain_min),
+            high_db=20.0 * math.log10(p.gain_max),
+        )
+
+    def staircase_gain(self) -> float:
+        """A staircase session: the gain the next trial's test sine plays at."""
+        trial = self.next_trial
+        if trial is None:
+            raise InputError(f"{self.folder}: the session is complete ({self.total} trials)")
+        return float(10.0 ** (self.track(trial.stimuli[0]).next_db / 20.0))
+
+    @property
     def done(self) -> int:
         """Data trials answered."""
         return len(self.rows)
@@ -298,6 +328,7 @@ class Session:
         originals: Sequence[str] | None = None,
         folder: str | os.PathLike[str] | None = None,
         now: datetime | None = None,
+        method: str = "adjustment",
     ) -> Session:
         """Create a session folder (never an existing one) and open it for appending trials.
 
@@ -324,6 +355,8 @@ class Session:
             An explicit session folder instead of a name under ``root``; refused if it exists.
         now : datetime, optional
             Creation time (tests).
+        method : str
+            Intensity: ``adjustment`` or a staircase (:mod:`~vibsynth.research.lab.staircase`).
 
         Raises
         ------
@@ -378,12 +411,13 @@ class Session:
                 "originals": list(originals) if originals is not None else None,
                 "stimuli": entries,
                 "plan": plan.to_dict(),
+                "method": check_method(method),
             }
             atomic_write_text(target / SESSION_FILE, json.dumps(meta, indent=1, allow_nan=False) + "\n")
             flags = os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_APPEND | getattr(os, "O_CLOEXEC", 0)
             fd = os.open(target / TRIALS_FILE, flags, 0o666)
             _lock(fd, target / TRIALS_FILE)
-            _write_all(fd, _csv_line(columns(name)).encode("utf-8"))
+            _write_all(fd, _csv_line(columns(name, method)).encode("utf-8"))
             os.fsync(fd)
             fsync_folder(target)
         except BaseException as exc:
@@ -438,7 +472,7 @@ class Session:
                 if len(data) > MAX_TRIALS_BYTES:
                     raise InputError(f"{csv_path}: larger than any plan writes; not read")
                 data = data[: data.rfind(b"\n") + 1]
-            rows = _read_rows(data, csv_path, meta["protocol"], plan)
+            rows = _read_rows(data, csv_path, meta["protocol"], plan, str(meta.get("method") or "adjustment"))
         except FileNotFoundError:
             raise InputError(f"{csv_path}: missing; not a complete session folder") from None
         except OSError as exc:
@@ -477,6 +511,8 @@ class Session:
         if trial is None:
             raise InputError(f"{self.folder}: the session is complete ({self.total} trials)")
         params = self.meta["parameters"]
+        if self.method != "adjustment":  # the staircase, not the participant, sets the gain
+            answer = replace(answer, value=self.staircase_gain())
         row = make_row(
             self.protocol,
             trial,
@@ -487,6 +523,7 @@ class Session:
             participant=self.participant,
             gain_range=(float(params["gain_min"]), float(params["gain_max"])),
             reference=str(self.meta.get("reference") or ""),
+            method=self.method,
         )
         try:
             _write_all(self._fd, _csv_line(list(row.values())).encode("utf-8"))
@@ -545,6 +582,8 @@ def _read_meta(folder: Path) -> dict[str, Any]:
         check_protocol(meta["protocol"])
         check_participant(meta["participant"])
         check_seed(meta["seed"])
+        if meta.get("method", "adjustment") not in METHODS:
+            raise ValueError(f"unknown method {str(meta.get('method'))[:40]!r}")
         LabParameters(**meta["parameters"])
         stimuli = meta["stimuli"]
         if not isinstance(stimuli, dict) or not all(
@@ -576,14 +615,14 @@ def _plan_from_meta(meta: dict[str, Any], folder: Path) -> Plan:
     return Plan(check_protocol(meta["protocol"]), int(meta["seed"]), fam, test)
 
 
-def _read_rows(data: bytes, path: Path, protocol: Protocol, plan: Plan) -> list[dict[str, str]]:
+def _read_rows(data: bytes, path: Path, protocol: Protocol, plan: Plan, method: str) -> list[dict[str, str]]:
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a UTF-8 text file") from None
     reader = csv.reader(io.StringIO(text))
     header = tuple(next(reader, ()))
-    if header != columns(protocol):
+    if header != columns(protocol, method):
         raise InputError(
             f"{path}:1: the header is not the {protocol} protocol's ({', '.join(columns(protocol)[:4])}...)"
         )

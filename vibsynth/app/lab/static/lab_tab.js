@@ -95,6 +95,10 @@ export async function mount(panel, studio) {
     type: "text", id: "lab-reference", "data-testid": "lab-reference", autocomplete: "off",
     placeholder: "sine:250", "aria-describedby": "lab-reference-help",
   });
+  const method = el("select", { id: "lab-method", "data-testid": "lab-method", "aria-describedby": "lab-method-help" },
+    el("option", { value: "adjustment", text: "Adjustment (a gain slider)" }),
+    el("option", { value: "staircase", text: "Staircase, 1-up/1-down (stronger/weaker)" }),
+    el("option", { value: "staircase-2d1u", text: "Staircase, 2-down/1-up (70.7 % point)" }));
   const channel = el("select", { id: "lab-channel" });
   const start = el("button", { type: "submit", "data-testid": "lab-start", text: "Start session" });
   const form = el("form", { class: "lab-form", novalidate: true },
@@ -110,6 +114,8 @@ export async function mount(panel, studio) {
     el("div", { class: "field" }, el("label", { for: "lab-familiarisation", text: "Familiarisation pairs" }), familiarisation),
     el("p", { class: "help", id: "lab-fam-help", text: "Dissimilarity only; not saved. The paper: 30. 0 to skip." }),
     el("div", { class: "field" }, el("label", { for: "lab-reference", text: "Reference sine" }), reference),
+    el("div", { class: "field" }, el("label", { for: "lab-method", text: "Method (sines)" }), method),
+    el("p", { class: "help", id: "lab-method-help", text: "Sines only: adjust a slider, or answer stronger/weaker while a staircase sets the level." }),
     el("p", { class: "help", id: "lab-reference-help",
       text: "Sines (iso-intensity) only: sine:F, default 250 Hz. Type sines:F1,F2,… (8–12, 10–1000 Hz) in Folder for your own frequencies." }),
     el("div", { class: "field" }, el("label", { for: "lab-channel", text: "Actuator" }), channel),
@@ -128,6 +134,7 @@ export async function mount(panel, studio) {
       familiarisation: Number(familiarisation.value),
       channel: Number(channel.value),
       reference: reference.value.trim() || null,
+      method: method.value,
     });
     start.disabled = false;
     note.textContent = "";
@@ -250,10 +257,31 @@ export async function mount(panel, studio) {
       el("span", { class: "end", text: high }));
   }
 
+  const staircase = () => state.protocol === "intensity" && Boolean(state.method) && state.method !== "adjustment";
+
+  async function judge(judgement) {
+    for (const b of answers.querySelectorAll("button")) b.disabled = true;
+    const s = await call("answer", { judgement });
+    if (s) render(s);
+    else for (const b of answers.querySelectorAll("button")) b.disabled = false;
+  }
+
   function buildAnswers() {
     answers.replaceChildren();
     touched = false;
-    if (state.protocol === "dissimilarity") {
+    next.hidden = staircase();
+    if (staircase()) {
+      // The staircase sets the level; the participant only compares it with the reference.
+      answers.append(
+        el("div", { class: "buttons" },
+          el("button", { type: "button", "data-testid": "lab-play-reference", text: "Play reference", onclick: playReference }),
+          el("button", { type: "button", "data-testid": "lab-play", text: "Play stimulus", onclick: () => play(null) })),
+        el("p", { id: "lab-judge-help", text: "Compared with the reference, the stimulus feels:" }),
+        el("div", { class: "buttons", role: "group", "aria-labelledby": "lab-judge-help" },
+          el("button", { type: "button", "data-testid": "lab-weaker", text: "Weaker", onclick: () => judge("weaker") }),
+          el("button", { type: "button", "data-testid": "lab-stronger", text: "Stronger", onclick: () => judge("stronger") })));
+      next.disabled = true;
+    } else if (state.protocol === "dissimilarity") {
       const row = slider({ "data-testid": "lab-answer", min: "0", max: "1", step: "0.001", value: "0.5",
         "aria-label": "Dissimilarity: very similar (0) to very dissimilar (1)" }, "very similar", "very dissimilar");
       row.querySelector("input").addEventListener("input", () => { touched = true; next.disabled = false; });
@@ -303,7 +331,7 @@ export async function mount(panel, studio) {
   async function play(slot) {
     const body = {};
     if (slot !== null) body.slot = slot;
-    if (state.protocol === "intensity") body.gain = 10 ** Number(answers.querySelector("[data-testid=lab-answer]").value);
+    if (state.protocol === "intensity" && !staircase()) body.gain = 10 ** Number(answers.querySelector("[data-testid=lab-answer]").value);
     const s = await call("play", body);
     if (s) render(s);
   }
@@ -314,7 +342,7 @@ export async function mount(panel, studio) {
   }
 
   async function submit() {
-    if (next.disabled) return;
+    if (next.disabled || staircase()) return;
     let body;
     if (state.protocol === "resynthesis") {
       body = { ratings: {} };
