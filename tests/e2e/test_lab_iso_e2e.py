@@ -230,3 +230,57 @@ def test_staircase_recovers_the_curve_in_the_browser(lab):
     assert len(errors) == 10 and all(abs(e) <= TOLERANCE_DB for e in errors.values()), errors
     back_to_set_up(browser)
     Select(browser.find_element(*by("lab-method"))).select_by_value("adjustment")
+
+
+def test_calibrate_tab_shows_the_response_curve_and_band_and_applies_it(lab):
+    """The Calibrate tab: a user profile's response, the iso-intensity sessions' curve, the band, apply."""
+    import shutil
+
+    import yaml
+    from selenium.webdriver.support.ui import Select
+
+    from vibsynth.app.calibrate import profile_band
+    from vibsynth.research.lab.iso import iso_curve
+    from vibsynth.research.lab.session import Session
+    from vibsynth.settings.actuators import shipped_profile_dir
+
+    browser, root, tmp = lab
+    folders = sorted(str(p) for p in root.iterdir() if p.name.startswith(("iso1-", "iso2-", "iso3-")))
+    assert len(folders) == 3
+    # a user profile (the serve's config folder): the shipped HapCoil example as if measured
+    user = tmp / "serve" / "xdg-config" / "vibsynth" / "actuators"
+    user.mkdir(parents=True, exist_ok=True)
+    shutil.copy(shipped_profile_dir() / "hapcoil-example.yaml", user / "my-coil.yaml")
+    doc = yaml.safe_load((user / "my-coil.yaml").read_text())
+    doc["name"] = "my-coil"
+    (user / "my-coil.yaml").write_text(yaml.safe_dump(doc))
+    sessions = [Session.open(f) for f in folders]
+    curve = iso_curve(sessions, response=doc["response"])
+    _, expected = profile_band(doc["response"], curve.freqs_hz, curve.acceleration_db)
+
+    browser.get(browser.current_url.split("#")[0] + "#calibrate")
+    browser.refresh()
+    select = wait(browser, lambda b: [e for e in b.find_elements(*by("calibrate-profile")) if e.is_displayed()], "tab")[
+        0
+    ]
+    wait(browser, lambda b: "my-coil" in select.text, "the user profile in the list")
+    Select(select).select_by_value("my-coil")
+    for box in browser.find_elements(*by("calibrate-session")):
+        if box.get_attribute("data-folder") in folders:
+            box.click()
+    visible(browser, "calibrate-show").click()
+    band = wait(browser, lambda b: visible(b, "calibrate-band").get_attribute("data-band"), "the band")
+    assert [float(v) for v in band.split(",")] == pytest.approx(expected, abs=0.051)
+    assert visible(browser, "calibrate-plot").find_elements(*by("calibrate-iso"))
+    shot(browser, tmp, "calibrate-tab")
+    visible(browser, "calibrate-apply").click()
+    wait(browser, lambda b: "now has the band" in visible(b, "calibrate-status").text, "applied")
+    written = yaml.safe_load((user / "my-coil.yaml").read_text())
+    assert written["band_hz"] == pytest.approx(expected, abs=0.051) and written["response"] == doc["response"]
+    assert "lab iso-intensity curve" in written["provenance"]["iso_curve"]
+    # a shipped profile is not written
+    Select(visible(browser, "calibrate-profile")).select_by_value("hapcoil-example")
+    visible(browser, "calibrate-apply").click()
+    wait(browser, lambda b: "shipped profile" in visible(b, "calibrate-error").text, "the refusal")
+    for s in sessions:
+        s.close()

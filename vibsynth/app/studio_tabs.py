@@ -22,7 +22,11 @@ __all__ = ["STUDIO_EXTENSION_MODULES", "studio_extensions"]
 log = logging.getLogger(__name__)
 
 #: Modules providing ``studio_extension(settings, controller, library)``, in tab order.
-STUDIO_EXTENSION_MODULES: tuple[str, ...] = ("vibsynth.app.lab.studio", "vibsynth.app.clips.studio")
+STUDIO_EXTENSION_MODULES: tuple[str, ...] = (
+    "vibsynth.app.lab.studio",
+    "vibsynth.app.clips.studio",
+    "vibsynth.app.lab.calibrate_tab",
+)
 
 
 def studio_extensions(

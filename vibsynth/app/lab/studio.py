@@ -316,28 +316,10 @@ class LabService:
     # ------------------------------------------------------------------ HTTP
     def add_routes(self, app: Any, host: StudioHost) -> None:
         """The routes under ``/ext/lab/`` (the studio calls this once at start)."""
-        from aiohttp import web
-
         self.host = host
 
         def handler(work: Any, *, body: bool = True) -> Any:
-            async def handle(request: Any) -> Any:
-                data: dict[str, Any] = {}
-                if body and request.can_read_body:
-                    try:
-                        data = await request.json()
-                    except ValueError:
-                        return self._refuse("the request body is not JSON")
-                    if not isinstance(data, dict):
-                        return self._refuse("the request body must be a JSON object")
-                loop = asyncio.get_running_loop()
-                try:
-                    result = await loop.run_in_executor(None, work, data)
-                except VibsynthError as exc:
-                    return self._refuse(str(exc))
-                return web.json_response(result)
-
-            return handle
+            return json_handler(work, self._refuse, body=body)
 
         r = app.router
         r.add_get("/ext/lab/setup", handler(lambda _: self.setup(), body=False))
@@ -370,6 +352,29 @@ class LabService:
         from aiohttp import web
 
         return web.Response(text=(STATIC / "lab.css").read_text(encoding="utf-8"), content_type="text/css")
+
+
+def json_handler(work: Any, refuse: Any, *, body: bool = True) -> Any:
+    """An aiohttp handler running ``work(body_dict)`` in an executor: its result as JSON, a
+    :class:`VibsynthError` (or a body that is no JSON object) as ``refuse(message)``."""
+    from aiohttp import web
+
+    async def handle(request: Any) -> Any:
+        data: dict[str, Any] = {}
+        if body and request.can_read_body:
+            try:
+                data = await request.json()
+            except ValueError:
+                return refuse("the request body is not JSON")
+            if not isinstance(data, dict):
+                return refuse("the request body must be a JSON object")
+        try:
+            result = await asyncio.get_running_loop().run_in_executor(None, work, data)
+        except VibsynthError as exc:
+            return refuse(str(exc))
+        return web.json_response(result)
+
+    return handle
 
 
 def studio_extension(settings: VibsynthConfig, controller: Any, library: Any) -> StudioExtension | None:

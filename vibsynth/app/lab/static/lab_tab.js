@@ -24,7 +24,7 @@ const PROTOCOLS = {
 const GAIN_STEP = 0.005; // log10 units: 1.2 % of gain per arrow key
 const LIVE_GAIN_MS = 50;
 
-function el(tag, attrs = {}, ...children) {
+export function el(tag, attrs = {}, ...children) {
   const node = document.createElement(tag);
   for (const [key, value] of Object.entries(attrs)) {
     if (value === null || value === undefined || value === false) continue;
@@ -37,9 +37,9 @@ function el(tag, attrs = {}, ...children) {
   return node;
 }
 
-const SVG_NS = "http://www.w3.org/2000/svg";
+export const SVG_NS = "http://www.w3.org/2000/svg";
 
-function fmt(value, digits = 3) {
+export function fmt(value, digits = 3) {
   return value === null || value === undefined || Number.isNaN(value) ? "–" : Number(value).toFixed(digits);
 }
 
