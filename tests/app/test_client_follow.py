@@ -38,7 +38,10 @@ def test_gain_gate_focus_and_per_channel_follow_round_trip(served):
     client.set_follow_gain(-6.5)
     client.set_follow_gate(-48.0)
     client.set_follow_focus("bass")
+    client.set_follow_range(30.0)
     assert client.follow_setting("gain") == -6.5
+    assert client.follow_setting("range") == 30.0
+    assert rig.follower.range_db == 30.0
     assert client.follow_setting("gate") == -48.0
     assert client.follow_setting("focus") == "bass"
     rig.feed(tone(FS, 0.2, 0.05))
@@ -58,4 +61,7 @@ def test_bad_values_are_refused_by_the_server_or_before_sending(served):
         client.follow_setting("volume")
     with pytest.raises(ParameterError, match="finite"):
         client.set_follow_gate(float("nan"))
+    client.set_follow_range(2.0)
+    with pytest.raises(ServerError, match=r"outside the allowed range \[6, 120\]"):
+        client.sync()
     assert rig.follower.gain_db == 0.0

@@ -42,7 +42,7 @@ from typing import Any, Literal, overload
 from pythonosc import osc_bundle_builder, osc_message, osc_message_builder, osc_packet
 from pythonosc.parsing import osc_types
 
-from vibsynth.errors import NoReplyError, ParameterError, ServerError
+from vibsynth.errors import NoReplyError, ParameterError, ServerError, VibsynthError
 
 __all__ = [
     "Client",
@@ -76,7 +76,7 @@ RELATIVE_LIMIT_S = 1e9
 
 GETTABLE = ("intensity", "balance", "texture", "glide", "mute", "preset", "driver", "follow")
 #: What :meth:`Client.follow_setting` reads (live Follow, docs/follow.md).
-FOLLOW_SETTINGS = ("gain", "gate", "focus")
+FOLLOW_SETTINGS = ("gain", "gate", "range", "focus")
 
 _BUNDLE_TAG = b"#bundle\x00"
 _MAX_PENDING_ERRORS = 256
@@ -550,6 +550,10 @@ class _Commands:
         """Live Follow's gate in dB: below this input level the output is silent (``follow.gate_db``'s range)."""
         self._emit(encode_message(f"{self._prefix}/follow/gate", (_number("follow gate (dB)", db),), "f"))
 
+    def set_follow_range(self, db: float) -> None:
+        """Live Follow's input range in dB, spread over the intensity knob (``follow.range_db``'s range)."""
+        self._emit(encode_message(f"{self._prefix}/follow/range", (_number("follow range (dB)", db),), "f"))
+
     def set_follow_focus(self, focus: str) -> None:
         """Live Follow's focus in audio mode: ``all``, ``effects``, ``bass`` or ``beat`` (docs/follow.md)."""
         if not isinstance(focus, str) or not focus:
@@ -774,7 +778,7 @@ class Client(_Commands):
 
         Raises
         ------
-        NoReplyError
+        VibsynthError
             No matching service answered within ``seconds``.
         """
         from vibsynth.control.oscquery.discovery import discover
@@ -782,7 +786,7 @@ class Client(_Commands):
         wanted = (name or "vibsynth").lower()
         found = [f for f in discover(seconds, interfaces=interfaces) if wanted in f.name.lower() and f.osc_port]
         if not found:
-            raise NoReplyError(f"no OSCQuery service named like {wanted!r} found in {seconds:g} s (is serve running?)")
+            raise VibsynthError(f"no OSCQuery service named like {wanted!r} found in {seconds:g} s (is serve running?)")
         service = found[0]
         assert service.osc_host is not None and service.osc_port is not None
         return cls(service.osc_host, service.osc_port, timeout=timeout)
