@@ -41,7 +41,9 @@ def main(folder: str, exe: str) -> None:
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:  # mDNS probing and announcing take a second or two
             found = run_mono(Path(exe), NAME, check=False)
-            if "intensity" in found:
+            # the first runs may browse while serve still probes its name (about 1 s): until both
+            # the listing and the connection have seen it
+            if "intensity" in found and found.get("service") == NAME:
                 break
             time.sleep(0.5)
         print(json.dumps(found))
