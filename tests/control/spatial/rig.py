@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from vibsynth.control.controller import Controller, KnobLimits
-from vibsynth.control.spatial.mixer import SourceMixer
+from vibsynth.control.spatial.mixer import LAYER, SourceMixer
 from vibsynth.control.spatial.sources import SourceDefaults, SourceTable
 from vibsynth.dsp.spatial import TextureSpectra
-from vibsynth.engine.commands import SetKnob
+from vibsynth.engine.commands import LAYER_NAMES, SetKnob
 from vibsynth.settings.layouts import Layout
 from vibsynth.settings.models_config import ChannelPosition
 
@@ -52,7 +52,11 @@ def make_mixer(controller: Controller, basis, *, positions=None, clock=None, **d
     )
 
 
-def knob_moves(engine, name: str, layer: int = 1) -> dict[int, SetKnob]:
+#: The engine layer index of the sources layer (knobs < follow < sources < clip).
+SOURCES_LAYER = LAYER_NAMES.index(LAYER)
+
+
+def knob_moves(engine, name: str, layer: int = SOURCES_LAYER) -> dict[int, SetKnob]:
     """The last move of knob ``name`` on the ``sources`` layer per channel (0-based), from the fake engine."""
     out: dict[int, SetKnob] = {}
     for command in engine.commands:

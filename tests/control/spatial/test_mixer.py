@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.control.osc.fakes import make_controller
-from tests.control.spatial.rig import LINE, Clock, knob_moves, make_mixer, spectra
+from tests.control.spatial.rig import LINE, SOURCES_LAYER, Clock, knob_moves, make_mixer, spectra
 from vibsynth.control import spatial
 from vibsynth.control.controller import Controller
 from vibsynth.dsp.intensity import knob_to_level_db, level_db_to_knob
@@ -257,4 +257,4 @@ def test_a_layout_channel_list_may_skip_channels(basis):
     clock.advance(0.05)
     mixer.step()
     assert mixer.driven() == {3: (0.8, 0.0)}
-    assert [c for c in ctl.engine.commands if isinstance(c, SetKnob) and c.layer == 1][-1].channels == (3,)
+    assert [c for c in ctl.engine.commands if isinstance(c, SetKnob) and c.layer == SOURCES_LAYER][-1].channels == (3,)
