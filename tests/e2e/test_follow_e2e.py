@@ -71,9 +71,18 @@ class Served:
             config += f"follow:\n  enabled: true\n  device: 'system:1,2'\n  mode: {follow}\n"
         before = jack_ports()
         self.proc, self.port = start_serve(folder, output="sounddevice", extra_config=config, env=serve_env(folder))
-        self.in_ports = new_ports(before) if follow is not None else []
-        self.out_ports = out_ports_since(before)
-        self.client = Client(port=self.port, timeout=2.0)
+        try:
+            # serve answers OSC before its follower has opened the input: wait for the ports
+            deadline = time.monotonic() + 10.0
+            self.in_ports = new_ports(before) if follow is not None else []
+            while follow is not None and len(self.in_ports) < 2 and time.monotonic() < deadline:
+                time.sleep(0.05)
+                self.in_ports = new_ports(before)
+            self.out_ports = out_ports_since(before)
+            self.client = Client(port=self.port, timeout=2.0)
+        except BaseException:
+            stop_serve(self.proc)  # never leave a serve on the server for the next tests
+            raise
 
     def close(self) -> None:
         self.client.close()
@@ -83,9 +92,11 @@ class Served:
 @pytest.fixture
 def served(jack_server, tmp_path):
     s = Served(tmp_path / "serve")
-    assert len(s.in_ports) == 2, s.in_ports
-    yield s
-    s.close()
+    try:
+        assert len(s.in_ports) == 2, s.in_ports
+        yield s
+    finally:
+        s.close()
 
 
 class GapCapture(JackCapture):
