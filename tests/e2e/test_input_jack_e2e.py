@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import queue
+import re
 import subprocess
 import sys
 import threading
@@ -56,9 +57,14 @@ ROUNDS = 4
 
 
 def new_ports(before: set[str]) -> list[str]:
-    """PortAudio's input ports that appeared since ``before`` (PortAudio numbers them on, stream after stream)."""
+    """PortAudio's input ports that appeared since ``before`` (PortAudio numbers them on, stream after stream).
+
+    Any PortAudio client counts: a process that initialised PortAudio on JACK holds the client
+    name ``PortAudio`` for as long as it lives (the test process itself, after an in-process
+    output test), and the next one is ``PortAudio-01``.
+    """
     ports = subprocess.run(["jack_lsp"], capture_output=True, text=True, check=True).stdout.split()
-    fresh = [p for p in ports if p.startswith("PortAudio:in_") and p not in before]
+    fresh = [p for p in ports if re.fullmatch(r"PortAudio[^:]*:in_\d+", p) and p not in before]
     return sorted(fresh, key=lambda name: (len(name), name))
 
 
