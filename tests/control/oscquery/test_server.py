@@ -12,6 +12,7 @@ from typing import Any
 import aiohttp
 import pytest
 
+from tests.control.oscquery.test_tree import check_node
 from vibsynth.control.osc.codec import decode_packet, encode_message
 from vibsynth.settings.allow_list import parse_allow_list
 
@@ -213,43 +214,63 @@ def test_a_taken_default_port_falls_back_and_a_chosen_one_is_an_error(server, tr
         OscQueryServer(tree, handler, ctl, port=server.port).start()
 
 
-def test_a_preset_file_added_on_disk_reaches_listeners_as_a_path_change(tmp_path, handler, ctl):
-    from vibsynth.control.oscquery.methods import method_nodes, reads
+def test_a_preset_file_added_on_disk_is_path_added_and_removed_path_removed(tmp_path, handler, ctl):
+    from vibsynth.control.oscquery.library import LibraryNodes
+    from vibsynth.control.oscquery.methods import knob_ranges, method_nodes, reads
     from vibsynth.control.oscquery.server import OscQueryServer
     from vibsynth.control.oscquery.tree import Tree
     from vibsynth.settings.library import PresetLibrary, shipped_presets_dir
 
     library = PresetLibrary(shipped_presets_dir(), tmp_path)
     tree = Tree(method_nodes(handler, library.names, lambda: []), reads(ctl))
+    low, high = knob_ranges(ctl)
+    tree.register(LibraryNodes("/vibsynth", library, None, intensity_range=low, balance_range=high))
     srv = OscQueryServer(tree, handler, ctl, port=0)
     srv.start()
+    node_path = "/vibsynth/presets/velvet-test"
+    file = tmp_path / "velvet-test.yaml"
+
+    async def collect(ws, until: set[tuple[str, str]]) -> set[tuple[str, str]]:
+        events: set[tuple[str, str]] = set()
+        while not until <= events:
+            msg = json.loads((await ws.receive(timeout=5)).data)
+            events.add((msg["COMMAND"], msg["DATA"]))
+        return events
 
     async def run():
         session = aiohttp.ClientSession()
         ws = await session.ws_connect(f"http://127.0.0.1:{srv.port}/")
         try:
             await asyncio.sleep(0.2)
-            (tmp_path / "velvet-test.yaml").write_text(
-                "version: 1\nname: velvet-test\nintensity: 0.5\nbalance: -1.0\n", encoding="utf-8"
+            file.write_text(
+                "version: 1\nname: velvet-test\nintensity: 0.5\nbalance: -1.0\ndescription: soft\n", encoding="utf-8"
             )
             library.reload()  # what the preset watcher of serve does
-            changed = set()
-            while "/vibsynth/ch/4/preset" not in changed:
-                msg = json.loads((await ws.receive(timeout=5)).data)
-                assert msg["COMMAND"] == "PATH_CHANGED"
-                changed.add(msg["DATA"])
-            return changed
+            added = await collect(ws, {("PATH_ADDED", node_path), ("PATH_CHANGED", "/vibsynth/ch/4/preset")})
+            status, node = get(srv, node_path)
+            file.unlink()
+            library.reload()
+            removed = await collect(ws, {("PATH_REMOVED", node_path)})
+            return added, (status, node), removed
         finally:
             await ws.close()
             await session.close()
 
     try:
-        changed = asyncio.run(run())
-        status, node = get(srv, "/vibsynth/preset?RANGE")
+        added, (status, node), removed = asyncio.run(run())
+        gone = get(srv, node_path)[0]
+        status_range, preset_node = get(srv, "/vibsynth/preset?RANGE")
     finally:
         srv.stop()
-    assert changed == {"/vibsynth/preset"} | {f"/vibsynth/ch/{c}/preset" for c in range(1, 5)}
-    assert status == 200 and "velvet-test" in node["RANGE"][0]["VALS"]
+    # the new file is a node of its own, and every preset node's VALS changed
+    changed = {p for c, p in added if c == "PATH_CHANGED"}
+    assert {"/vibsynth/preset"} | {f"/vibsynth/ch/{c}/preset" for c in range(1, 5)} <= changed
+    assert {c for c, _ in added} <= {"PATH_ADDED", "PATH_CHANGED"}
+    assert status == 200 and node["VALUE"] == [0.5, -1.0] and node["ACCESS"] == 1 and node["TYPE"] == "ff"
+    assert "soft" in node["DESCRIPTION"] and "/vibsynth/preset s velvet-test" in node["DESCRIPTION"]
+    check_node(node)
+    assert ("PATH_REMOVED", node_path) in removed and gone == 404
+    assert status_range == 200 and "velvet-test" not in preset_node["RANGE"][0]["VALS"]
 
 
 def test_without_websocket_clients_a_read_sees_the_current_structure(server, presets, monkeypatch):

@@ -15,7 +15,8 @@ from typing import Any
 from vibsynth.control import oscquery
 from vibsynth.control.controller import Controller
 from vibsynth.control.oscquery.discovery import Advertiser, default_name
-from vibsynth.control.oscquery.methods import method_nodes, reads
+from vibsynth.control.oscquery.library import LibraryNodes
+from vibsynth.control.oscquery.methods import knob_ranges, method_nodes, reads
 from vibsynth.control.oscquery.server import OscQueryServer
 from vibsynth.control.oscquery.tree import Tree
 from vibsynth.settings.cli_args import flag_type
@@ -120,7 +121,8 @@ def create(
     osc_server : OscServer or None
         The OSC server described (None: no OSC server, nothing to describe).
     presets, clips : library, optional
-        Their names are the preset and clip nodes' RANGE VALS.
+        Their names are the preset and clip nodes' RANGE VALS, and each entry is a node of its own
+        (``/vibsynth/presets/NAME``, ``/vibsynth/clips/NAME``: :mod:`~vibsynth.control.oscquery.library`).
     """
     discovery = settings.discovery
     if osc_server is None or getattr(args, "no_discovery", False) or not discovery.enabled:
@@ -132,6 +134,10 @@ def create(
         method_nodes(handler, _names(presets), _names(clips)),
         reads(controller),
         root_description=f"{name}: haptic textures (docs/osc.md)",
+    )
+    intensity_range, balance_range = knob_ranges(controller)
+    tree.register(
+        LibraryNodes(handler.prefix, presets, clips, intensity_range=intensity_range, balance_range=balance_range)
     )
     port_flag = getattr(args, "oscquery_port", None)
     osc_host = str(getattr(args, "osc_host", None) or settings.osc.host)

@@ -27,7 +27,7 @@ from vibsynth.settings.cli_args import flag_choices
 from vibsynth.settings.models import bounds_of
 from vibsynth.settings.models_sources import MAX_SOURCES, POSITION_LIMIT_M, ROLLOFF_NAMES
 
-__all__ = ["method_nodes", "reads"]
+__all__ = ["method_nodes", "reads", "knob_ranges"]
 
 Names = Callable[[], list[str]]
 
@@ -60,12 +60,16 @@ def reads(controller: Controller) -> dict[str, Callable[[], Any]]:
     return {"state": controller.state, "sources": sources, "follower": lambda: follower_of(controller)}
 
 
+def knob_ranges(controller: Controller) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The intensity and balance knobs' RANGE items: the typed settings' and the controller's live bounds."""
+    limits = controller.limits
+    return _bounds("knobs.initial_intensity"), _span(limits.balance_min, limits.balance_max)
+
+
 def _channel_specs(controller: Controller, presets: Names) -> dict[str, Callable[[int], NodeSpec]]:
     """Knob method -> spec of channel ``c`` (0-based)."""
-    limits = controller.limits
-    intensity = _bounds("knobs.initial_intensity")
-    balance = _span(limits.balance_min, limits.balance_max)
-    glide = _span(0.0, limits.glide_max_s * 1000.0)
+    intensity, balance = knob_ranges(controller)
+    glide = _span(0.0, controller.limits.glide_max_s * 1000.0)
 
     def state(name: str, c: int, convert: Callable[[Any], Any] = float) -> Callable[[Context], list[Any]]:
         return lambda ctx: [convert(getattr(ctx["state"][c], name))]
@@ -134,11 +138,9 @@ def _follow_spec(method: str, channel: int | None) -> NodeSpec:
 
 def _source_specs(controller: Controller, presets: Names, clips: Names) -> dict[str, Callable[[int], NodeSpec]]:
     """Source method -> spec of source ``k`` (0-based)."""
-    limits = controller.limits
     pos = _span(-POSITION_LIMIT_M, POSITION_LIMIT_M)
     radius = _bounds("sources.radius")
-    balance = _span(limits.balance_min, limits.balance_max)
-    unit = _bounds("knobs.initial_intensity")
+    unit, balance = knob_ranges(controller)
 
     def view(k: int, read: Callable[[Any], list[Any]]) -> Callable[[Context], list[Any] | None]:
         return lambda ctx: None if ctx["sources"] is None else read(ctx["sources"][k])
