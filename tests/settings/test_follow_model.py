@@ -30,6 +30,31 @@ def test_routes_name_a_channel_or_a_source_and_their_inputs():
     assert (second.source, second.focus) == (4, "bass")
 
 
+PAN = {"left": [0.0, 0.0], "right": [0.3, 0.0]}
+
+
+def test_a_source_route_with_two_inputs_takes_a_pan_between_two_points():
+    settings = VibsynthConfig.model_validate(
+        {"follow": {"routes": [{"source": 2, "inputs": [1, 2], "pan": {**PAN, "right": [0.3, 0.1, 0.02]}}]}}
+    )
+    pan = settings.follow.routes[0].pan
+    assert (pan.left, pan.right, pan.range_db) == ([0.0, 0.0], [0.3, 0.1, 0.02], 12.0)
+
+
+def test_a_bad_pan_in_a_config_file_names_its_key_and_the_allowed_range(tmp_path):
+    from vibsynth.errors import ConfigError
+    from vibsynth.settings.config import check_config_file
+
+    path = tmp_path / "user.yaml"
+    path.write_text(
+        "follow:\n  routes:\n    - {source: 1, inputs: [1, 2], pan: {left: [0, 0], right: [0.3, 0], range_db: 99}}\n"
+    )
+    with pytest.raises(
+        ConfigError, match=r"user.yaml:3: follow.routes\[0\].pan.range_db = 99: outside the allowed range \[1, 60\] dB"
+    ):
+        check_config_file(path)
+
+
 @pytest.mark.parametrize(
     ("follow", "message"),
     [
@@ -42,6 +67,13 @@ def test_routes_name_a_channel_or_a_source_and_their_inputs():
         ({"gain_db": 61}, "less than or equal to 60"),
         ({"mode": "noise"}, "'vibration' or 'audio'"),
         ({"on_loss": "stop"}, "'hold' or 'fade'"),
+        ({"routes": [{"channel": 1, "inputs": [1, 2], "pan": PAN}]}, "item 0: pan moves a touch source"),
+        ({"routes": [{"source": 1, "inputs": [1], "pan": PAN}]}, "item 0: pan needs exactly two inputs"),
+        ({"routes": [{"source": 1, "pan": PAN}]}, "item 0: pan needs exactly two inputs"),
+        ({"routes": [{"source": 1, "inputs": [1, 2], "pan": {**PAN, "range_db": 0.5}}]}, "greater than or equal to 1"),
+        ({"routes": [{"source": 1, "inputs": [1, 2], "pan": {**PAN, "left": [0.0]}}]}, "at least 2 items"),
+        ({"routes": [{"source": 1, "inputs": [1, 2], "pan": {**PAN, "right": [11.0, 0]}}]}, "less than or equal to 10"),
+        ({"routes": [{"source": 1, "inputs": [1, 2], "pan": {"left": [0, 0]}}]}, "right"),
     ],
 )
 def test_bad_follow_settings_are_one_clear_error(follow, message):

@@ -12,6 +12,8 @@ once there. docs/follow.md ("Live") explains what each key does. Example::
       routes:                   # stereo in: input 1 -> actuator 1, input 2 -> actuator 2
         - {channel: 1, inputs: [1]}
         - {channel: 2, inputs: [2], gain_db: -3}
+        # or: the stereo balance pans touch source 1 between two points of the layout
+        - {source: 1, inputs: [1, 2], pan: {left: [0, 0], right: [0.3, 0]}}
 """
 
 from __future__ import annotations
@@ -28,9 +30,9 @@ from vibsynth.dsp.follow.params import (
     TrackerParams,
 )
 from vibsynth.settings.fields import Section, ValueModel, problem, setting
-from vibsynth.settings.models_sources import MAX_SOURCES
+from vibsynth.settings.models_sources import MAX_SOURCES, POSITION_LIMIT_M
 
-__all__ = ["MAX_ROUTES", "MAX_INPUT", "FADE_S_LIMITS", "FollowRoute", "Follow"]
+__all__ = ["MAX_ROUTES", "MAX_INPUT", "FADE_S_LIMITS", "PAN_RANGE_DB_LIMITS", "FollowPan", "FollowRoute", "Follow"]
 
 #: Routes of ``follow.routes`` (one per output channel or source at most).
 MAX_ROUTES = 64
@@ -38,6 +40,8 @@ MAX_ROUTES = 64
 MAX_INPUT = 64
 #: ``follow.fade_s``: how long the output fades when the input is lost.
 FADE_S_LIMITS = (0.0, 60.0)
+#: ``pan.range_db``: the left/right level difference (dB) that puts a panned source at one end.
+PAN_RANGE_DB_LIMITS = (1.0, 60.0)
 
 _DEFAULTS = TrackerParams()
 _Mode = Literal["vibration", "audio"]
@@ -46,6 +50,33 @@ _Ms = Annotated[float, Field(ge=TIME_MS_LIMITS[0], le=TIME_MS_LIMITS[1])]
 _Gate = Annotated[float, Field(ge=GATE_DB_LIMITS[0], le=GATE_DB_LIMITS[1])]
 _Range = Annotated[float, Field(ge=RANGE_DB_LIMITS[0], le=RANGE_DB_LIMITS[1])]
 _Input = Annotated[int, Field(ge=1, le=MAX_INPUT)]
+_Coordinate = Annotated[float, Field(ge=-POSITION_LIMIT_M, le=POSITION_LIMIT_M)]
+_POINT_ALLOWED = f"[x, y] or [x, y, z] in metres, each in [-{POSITION_LIMIT_M:g}, {POSITION_LIMIT_M:g}]"
+
+
+class FollowPan(ValueModel):
+    """``pan:`` of a source route with two inputs: the stereo balance moves the source between two points.
+
+    The level difference of the two inputs, ``d = L - R`` in dB (each input's level measured like
+    the route's tracker: the 80-200 Hz band in vibration mode, K-weighted in audio mode, over
+    its balance window), puts the source at ``left + u (right - left)`` with
+    ``u = 0.5 - d / (2 range_db)`` clipped to [0, 1]: only the first input -> ``left``, equal
+    levels -> the middle, only the second -> ``right``.
+    """
+
+    left: Annotated[list[_Coordinate], Field(min_length=2, max_length=3)] = setting(
+        ..., "where the source is when only the route's first input sounds", unit="m", allowed=_POINT_ALLOWED
+    )
+    right: Annotated[list[_Coordinate], Field(min_length=2, max_length=3)] = setting(
+        ..., "where the source is when only the route's second input sounds", unit="m", allowed=_POINT_ALLOWED
+    )
+    range_db: float = setting(
+        12.0,
+        "left/right level difference that puts the source at one end (0 dB: the middle)",
+        unit="dB",
+        ge=PAN_RANGE_DB_LIMITS[0],
+        le=PAN_RANGE_DB_LIMITS[1],
+    )
 
 
 class FollowRoute(ValueModel):
@@ -72,11 +103,16 @@ class FollowRoute(ValueModel):
     attack_ms: _Ms | None = setting(None, "null = follow.attack_ms", unit="ms")
     release_ms: _Ms | None = setting(None, "null = follow.release_ms", unit="ms")
     transients: bool | None = setting(None, "null = follow.transients")
+    pan: FollowPan | None = setting(
+        None,
+        "a source route with two inputs: their stereo balance moves the source between pan.left and pan.right",
+        allowed="null or {left: [x, y(, z)], right: [x, y(, z)], range_db: dB} (a source route with 2 inputs)",
+    )
 
 
 _ROUTES_ALLOWED = (
     "a list of {channel: N or source: K} with optional inputs (1-based list), mode, focus, gain_db, "
-    "gate_db, range_db, attack_ms, release_ms, transients"
+    "gate_db, range_db, attack_ms, release_ms, transients, pan (a source with 2 inputs)"
 )
 
 
@@ -96,6 +132,11 @@ def _check_routes(value: Any) -> Any:
         inputs = route.get("inputs")
         if isinstance(inputs, list) and len(set(map(repr, inputs))) != len(inputs):
             raise problem(f"item {i}: an input is listed twice in {inputs}", i, "inputs")
+        if route.get("pan") is not None:
+            if "source" not in route:
+                raise problem(f"item {i}: pan moves a touch source: give source: K, not channel", i, "pan")
+            if not (isinstance(inputs, list) and len(inputs) == 2):
+                raise problem(f"item {i}: pan needs exactly two inputs (inputs: [L, R]), got {inputs!r}", i, "inputs")
         other = taken.setdefault(key, i)
         if other != i:
             raise problem(f"item {i}: {key[0]} {key[1]} is followed by item {other} already", i)

@@ -6,7 +6,9 @@ step), mixes each route's input channels, runs the route's
 :class:`~vibsynth.dsp.follow.Tracker` and submits the newest frame as an ordinary controller
 move on the ``follow`` layer (:meth:`~vibsynth.control.controller.Controller.drive`), gliding
 over one hop so the knob moves as straight lines between frames (no zipper noise). A route to a
-touch source sets the source's texture through the spatial mixer instead.
+touch source sets the source's texture through the spatial mixer instead; with ``pan`` its two
+inputs' level difference also places the source between two points of the layout
+(:mod:`~vibsynth.control.follow.pan`).
 
 Precedence (the controller's layers, low to high): knobs < follow < sources < clip. A channel
 that follows ignores direct knob moves (they are remembered and play when follow is turned off
@@ -37,6 +39,7 @@ from numpy.typing import NDArray
 
 from vibsynth.control import spatial
 from vibsynth.control.controller import Controller, check_range
+from vibsynth.control.follow.pan import StereoPan
 from vibsynth.control.follow.routes import LiveValues, RouteSpec, default_gate_db, plan_routes, route_params
 from vibsynth.control.follow.transients import TransientEnvelope
 from vibsynth.dsp.basis import Basis
@@ -64,6 +67,8 @@ HISTORY_POINTS = 500
 #: Knob changes smaller than these are not sent again (0.04 dB of intensity at the default range).
 _EPS_INTENSITY = 1e-3
 _EPS_BALANCE = 5e-3
+#: A panned source is moved again when its place between the two points changed by more than this.
+_EPS_PAN = 5e-3
 #: The input's status (device state, meters) is read at most this often.
 _STATUS_EVERY_S = 0.05
 #: Level reported when nothing was tracked yet (dB).
@@ -84,6 +89,8 @@ class RouteView:
     balance: float
     mode: str
     focus: str
+    #: A panned source's place between ``pan.left`` (0) and ``pan.right`` (1); None without pan.
+    pan: float | None = None
 
 
 @dataclass
@@ -91,6 +98,8 @@ class _Route:
     spec: RouteSpec
     tracker: Tracker
     envelope: TransientEnvelope
+    pan: StereoPan | None = None
+    pan_sent: float | None = None
     on: bool = True
     sent: tuple[float, float] | None = None
     level_db: float = FLOOR_DB
@@ -196,7 +205,9 @@ class Follower:
             range_db=self.knobs.range_db,
             balance_limits=(limits.balance_min, limits.balance_max),
         )
-        return _Route(spec, tracker, TransientEnvelope(self.source.fs, self.transient_decay_s))
+        pan = spec.route.pan
+        stereo = None if pan is None else StereoPan(self.source.fs, tracker.params, pan)
+        return _Route(spec, tracker, TransientEnvelope(self.source.fs, self.transient_decay_s), stereo)
 
     def start(self) -> None:
         """Open the input, build the routes and start the worker."""
@@ -280,6 +291,8 @@ class Follower:
                 columns = route.spec.columns
                 x = block[:, columns[0]] if len(columns) == 1 else block[:, list(columns)].mean(axis=1)
                 frames = route.tracker.process(x)
+                if route.pan is not None:
+                    self._pan(route, block[:, list(columns)])
                 if not len(frames):
                     continue
                 jump = False
@@ -351,6 +364,25 @@ class Follower:
         route.sent = (intensity, balance)
         self.submitted += 1
 
+    def _pan(self, route: _Route, stereo: NDArray[np.float32]) -> None:
+        """Place a panned source by its two inputs' balance (while its gate is open and the route is on)."""
+        assert route.pan is not None
+        u = route.pan.process(stereo)
+        if not (route.on and route.gate) or (route.pan_sent is not None and abs(u - route.pan_sent) < _EPS_PAN):
+            return
+        mixer = spatial.mixer_of(self.controller)
+        if mixer is None:
+            return
+        index, place, first = route.spec.index, route.pan.position(u), route.pan_sent is None
+
+        def update(table: Any, t: float) -> None:
+            table.set_position(index, place, t)
+            if first:
+                table.set_on(index, True, t)  # a panned source appears where its input puts it
+
+        mixer.apply(update)
+        route.pan_sent = u
+
     def _drive_source(self, index: int, intensity: float, balance: float) -> None:
         mixer = spatial.mixer_of(self.controller)
         if mixer is None:
@@ -391,6 +423,8 @@ class Follower:
                 route.tracker.reset()
                 route.envelope.reset()
                 route.sent = None
+                if route.pan is not None:
+                    route.pan.reset()
 
     # ------------------------------------------------------------------ live controls
     def _apply_params(self) -> None:
@@ -506,6 +540,7 @@ class Follower:
                     r.balance,
                     r.tracker.params.mode,
                     r.tracker.params.focus,
+                    None if r.pan is None else round(r.pan.fraction, 4),
                 )
                 for r in self._routes
             ]
