@@ -184,3 +184,77 @@ def test_a_source_controller_must_not_move_a_knob_too(tmp_path):
         "    - {source: 2, x: {cc: 74, channel: 2}}\n",
     )
     assert cfg.settings.sources.midi[0].x.cc == 74
+
+
+# --------------------------------------------------------------------------- per-channel actuator profiles
+def write_profile(name, *, absolute=True, rate=48000, gain=0.0):
+    from vibsynth.settings.actuators import user_profile_dir
+
+    folder = user_profile_dir()
+    folder.mkdir(parents=True, exist_ok=True)
+    rate_line = f"rate: {rate}\n" if rate else ""
+    (folder / f"{name}.yaml").write_text(
+        f"name: {name}\nabsolute: {str(absolute).lower()}\n{rate_line}response: [[10, {gain - 20}], [100, {gain}], "
+        f"[1000, {gain}]]\n"
+    )
+
+
+def test_channel_profiles_from_a_pattern_a_list_or_the_layout(tmp_path):
+    from vibsynth.settings.layouts import channel_profile_names
+
+    for k in (1, 2, 3):
+        write_profile(f"vest-ch{k}", gain=3.0 * k)
+    _, cfg = config(tmp_path, "audio:\n  channels: 3\nactuator:\n  channel_profiles: vest-ch{n}\n")
+    assert channel_profile_names(cfg.settings) == ["vest-ch1", "vest-ch2", "vest-ch3"]
+    text = "audio:\n  channels: 3\nactuator:\n  profile: vest-ch1\n  channel_profiles: [vest-ch2, null]\n"
+    _, cfg = config(tmp_path, text)
+    assert channel_profile_names(cfg.settings) == ["vest-ch2", None, None]
+    text = (
+        "audio:\n  channels: 3\nactuator:\n  profile: vest-ch1\nlayout:\n  1: {x: 0, y: 0, profile: vest-ch3}\n"
+        "  3: {x: 1, y: 0}\n"
+    )
+    _, cfg = config(tmp_path, text)
+    assert channel_profile_names(cfg.settings) == ["vest-ch3", None, None]
+    assert resolve_layout(cfg.settings).profiles == ["vest-ch3", None]
+    _, cfg = config(tmp_path, "audio:\n  channels: 2\n")
+    assert channel_profile_names(cfg.settings) == [None, None]
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        ("actuator:\n  channel_profiles: vest\n", "needs {n} once"),
+        ("actuator:\n  channel_profiles: vest-{n}-{n}\n", "needs {n} once"),
+        ("actuator:\n  channel_profiles: [ok, 'bad name']\n", "channel 2: 'bad name' is not a profile name"),
+        ("actuator:\n  channel_profiles: 7\n", "must be a name pattern like vest-ch{n}"),
+        ("actuator:\n  channel_profiles: [a, b, c]\n", "lists 3 channels but audio.channels = 2"),
+        ("actuator:\n  channel_profiles: nope-ch{n}\n", "channel 1's profile 'nope-ch1' does not exist (allowed: flat"),
+        ("layout:\n  1: {x: 0, y: 0, profile: 'a b'}\n", "layout.1.profile"),
+        ("layout:\n  1: {x: 0, y: 0, profile: nope}\n", "layout: channel 1's profile 'nope' does not exist"),
+    ],
+)
+def test_bad_channel_profiles_name_the_key_and_the_allowed_values(tmp_path, text, fragment):
+    with pytest.raises(ConfigError) as err:
+        config(tmp_path, "audio:\n  channels: 2\n" + text)
+    assert fragment in str(err.value) and "rig.yaml" in str(err.value)
+
+
+def test_measured_and_relative_profiles_are_not_mixed(tmp_path):
+    write_profile("coil", absolute=True)
+    write_profile("shape", absolute=False, rate=None)
+    with pytest.raises(ConfigError) as err:
+        config(tmp_path, "audio:\n  channels: 2\nactuator:\n  channel_profiles: [coil, shape]\n")
+    assert "channels 1 (coil) have measured (absolute) profiles but channels 2 (shape) relative ones" in str(err.value)
+    # a channel left to actuator.profile (flat, relative) counts too
+    with pytest.raises(ConfigError, match=r"channels 2 \(flat\) relative"):
+        config(tmp_path, "audio:\n  channels: 2\nactuator:\n  channel_profiles: [coil]\n")
+    _, cfg = config(tmp_path, "audio:\n  channels: 2\nactuator:\n  profile: coil\n  channel_profiles: [coil]\n")
+    assert cfg.settings.actuator.channel_profiles == ["coil"]
+
+
+def test_a_channel_profile_measured_at_another_rate_is_refused(tmp_path):
+    write_profile("fast", rate=44100)
+    with pytest.raises(ConfigError) as err:
+        config(tmp_path, "audio:\n  channels: 2\nactuator:\n  channel_profiles: [null, fast]\n")
+    message = str(err.value)
+    assert "channel 2: actuator profile 'fast' was measured at 44100 Hz but audio.rate is 48000 Hz" in message

@@ -255,7 +255,7 @@ def test_layout_is_typed_and_checked_against_the_channels(tmp_path):
             "layout.2 = {'name': 'a', 'x': 0, 'y': 1}: channel 2: name 'a' is already channel 1's",
         ),
         ("layout:\n  1: {x: 0}\n", "layout.1: missing key 'y'"),
-        ("layout:\n  1: {x: 0, y: 0, w: 1}\n", "unknown key 'layout.1.w' (allowed: x, y, z, name)"),
+        ("layout:\n  1: {x: 0, y: 0, w: 1}\n", "unknown key 'layout.1.w' (allowed: x, y, z, name, profile)"),
         ("layout: [1, 2]\n", "layout = [1, 2]: must be a layout name or a mapping of positions (allowed: null,"),
     ]:
         path.write_text(text)

@@ -28,17 +28,28 @@ from typing import Any
 from vibsynth.control import adapter_modules
 from vibsynth.control.controller import Controller
 from vibsynth.dsp.basis import Basis
+from vibsynth.dsp.felt_intensity import PAPER_WEIGHTING, IntensityWeighting, profile_weighting
 from vibsynth.engine.actuator import ActuatorResponse
 from vibsynth.engine.bank import BankSpec, load_or_build
 from vibsynth.engine.commands import SetMute
 from vibsynth.engine.engine import Engine
 from vibsynth.engine.outputs import NullOutput, OutputBackend, SoundDeviceOutput, WavOutput
 from vibsynth.engine.supervisor import STREAMING, ExitGuard, hard_exit
+from vibsynth.engine.trims import ChannelActuator, apply_trims, derive_trims, mean_response
 from vibsynth.errors import ConfigError, DeviceError, ParameterError, VibsynthError
-from vibsynth.settings.actuators import resolve_actuator_absolute, resolve_actuator_response
+from vibsynth.settings.actuators import load_actuator_profile, resolve_actuator_absolute, resolve_actuator_response
+from vibsynth.settings.layouts import channel_profile_names
 from vibsynth.settings.models_config import Audio, VibsynthConfig
 
-__all__ = ["build_engine", "open_output", "serve", "actuator_from_settings", "status_line"]
+__all__ = [
+    "build_engine",
+    "open_output",
+    "serve",
+    "actuator_from_settings",
+    "intensity_from_settings",
+    "channel_actuators",
+    "status_line",
+]
 
 log = logging.getLogger(__name__)
 
@@ -55,13 +66,52 @@ def actuator_from_settings(settings: VibsynthConfig) -> ActuatorResponse:
     )
 
 
+def _profile_intensity(name: str) -> IntensityWeighting:
+    profile = load_actuator_profile(name)
+    return profile_weighting(profile["response"], profile["weighting"], profile["band_hz"], source=f"profile {name}")
+
+
+def intensity_from_settings(settings: VibsynthConfig) -> IntensityWeighting:
+    """What the knob's level means for ``actuator:``: a calibrated profile's own weighting, else the paper's band."""
+    actuator = settings.actuator
+    if actuator.response is not None or actuator.profile is None:
+        return PAPER_WEIGHTING
+    return _profile_intensity(actuator.profile)
+
+
+def channel_actuators(settings: VibsynthConfig) -> list[ChannelActuator] | None:
+    """Each channel's actuator when some channel has its own profile (else None: one profile for all).
+
+    Channels without their own profile use ``actuator:`` (its points or profile).
+    """
+    names = channel_profile_names(settings)
+    if not any(names):
+        return None
+    base = ChannelActuator(
+        settings.actuator.profile, actuator_from_settings(settings), intensity_from_settings(settings)
+    )
+    out = []
+    for name in names:
+        if name is None:
+            out.append(base)
+            continue
+        profile = load_actuator_profile(name)
+        response = ActuatorResponse.from_points(
+            profile["response"], max_boost_db=settings.actuator.max_boost_db, absolute=bool(profile["absolute"])
+        )
+        out.append(ChannelActuator(name, response, _profile_intensity(name)))
+    return out
+
+
 def build_engine(
     settings: VibsynthConfig, basis: Basis | None = None, *, progress: Callable[[float, str], None] | None = None
 ) -> Engine:
     """Build (or load from the cache) the bank and an engine from the typed settings.
 
     The bank takes ``bank:`` (at ``audio.rate``, equalised for ``actuator:``), the engine
-    ``knobs:`` and ``audio:`` (:meth:`Engine.from_settings`).
+    ``knobs:`` and ``audio:`` (:meth:`Engine.from_settings`). With per-channel profiles
+    (``actuator.channel_profiles`` or the layout's), the bank is equalised for the channels'
+    mean response and each channel gets its trim (:mod:`vibsynth.engine.trims`).
 
     Parameters
     ----------
@@ -80,8 +130,14 @@ def build_engine(
         from vibsynth.formats.basis_file import default_basis
 
         basis = default_basis()
+    channels = channel_actuators(settings)
+    if channels is None:
+        reference, intensity = actuator_from_settings(settings), intensity_from_settings(settings)
+    else:
+        reference = mean_response([c.response for c in channels])
+        intensity = channels[0].intensity
     try:
-        spec = BankSpec.from_settings(settings.bank, settings.audio.rate, actuator_from_settings(settings))
+        spec = BankSpec.from_settings(settings.bank, settings.audio.rate, reference, intensity)
     except (ParameterError, TypeError, ValueError) as exc:
         raise ConfigError(f"bank/audio settings: {exc}") from None
     cache_dir = settings.bank.cache_dir
@@ -96,9 +152,15 @@ def build_engine(
         bank.fs,
     )
     try:
-        return Engine.from_settings(bank, settings.knobs, settings.audio)
+        engine = Engine.from_settings(bank, settings.knobs, settings.audio)
     except ParameterError as exc:
         raise ConfigError(f"engine settings: {exc}") from None
+    if channels is not None:
+        trims = derive_trims(bank, basis, reference, intensity, channels, max_gain_db=settings.actuator.max_boost_db)
+        apply_trims(engine, trims)
+        for c, (channel, trim) in enumerate(zip(channels, trims, strict=True)):
+            log.info("channel %d (%s): %s", c + 1, channel.name or "actuator.profile", trim.describe())
+    return engine
 
 
 def open_output(

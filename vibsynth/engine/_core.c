@@ -31,6 +31,13 @@
  * texture with a ramped gain and 5 ms edge fades, before the limiter's final clip. The
  * producer keeps the samples alive until the channel's voice id no longer names them.
  *
+ * Trims: each channel can carry a calibration trim (CMD_TRIM): a balance offset added to its
+ * balance knob and a gain curve over the bank's levels, read at the channel's effective bank
+ * position, both applied after every layer resolved the knobs (so direct knobs, follow, sources
+ * and clips all get them) and before the limiter. A new trim glides in (a linear blend from the
+ * previous curve, the offset ramped), so changing one never clicks. The producer keeps each
+ * curve alive for the engine's lifetime.
+ *
  * Output tap: every rendered frame is also copied into a ring of TAP_FRAMES frames, which
  * control threads read (Core.read_tap) for meters and spectra; the audio thread never waits.
  *
@@ -54,8 +61,9 @@
 #define PA_OUTPUT_UNDERFLOW 0x00000004UL
 #define TAP_FRAMES 65536 /* a power of two */
 #define VOICE_FADE_S 0.005
+#define TRIM_GLIDE_S 0.05
 
-enum { R_INTENSITY = 0, R_BALANCE = 1, R_MUTE = 2, R_VOICE = 3, N_RAMPS = 4 };
+enum { R_INTENSITY = 0, R_BALANCE = 1, R_MUTE = 2, R_VOICE = 3, R_TRIM_BAL = 4, R_TRIM_MIX = 5, N_RAMPS = 6 };
 typedef vs_cmd_t cmd_t;
 
 typedef struct {
@@ -90,6 +98,8 @@ typedef struct vs_core {
     int64_t vid[MAXCH]; /* published: seq of the CMD_VOICE playing, 0 = none */
     int32_t vstop[MAXCH];
     double vfade;
+    /* trims: gain curves over the bank levels (NULL = 1), blended prev -> cur by R_TRIM_MIX */
+    const float *tcur[MAXCH], *tprev[MAXCH];
     /* output tap */
     float *tap;
     int64_t tap_frame; /* published: frames written to the tap */
@@ -258,6 +268,24 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
         }
         break;
     }
+    case CMD_TRIM: {
+        if (cmd->ptr && cmd->ival != c->levels) break;
+        double glide = isnan(cmd->glide) ? TRIM_GLIDE_S : cmd->glide;
+        int64_t samples = (int64_t)nearbyint(glide * fs);
+        for (int ch = 0; ch < c->channels; ch++) {
+            if (!(cmd->mask >> ch & 1)) continue;
+            c->tprev[ch] = c->tcur[ch];
+            c->tcur[ch] = cmd->ptr;
+            ramps_t *mix = &c->ramps[R_TRIM_MIX];
+            mix->start[ch] = 0.0;
+            mix->delta[ch] = 0.0;
+            mix->pos[ch] = 1.0;
+            mix->len[ch] = 1.0;
+            ramp_move(mix, ch, 1.0, samples, frame);
+            ramp_move(&c->ramps[R_TRIM_BAL], ch, cmd->value, samples, frame);
+        }
+        break;
+    }
     case CMD_VOICE_STOP:
         for (int ch = 0; ch < c->channels; ch++) {
             if (!(cmd->mask >> ch & 1) || !c->vbuf[ch]) continue;
@@ -299,9 +327,16 @@ static void drain(Core *c, int64_t block_start) {
 }
 
 /* ------------------------------------------------------------------ rendering */
+static inline double trim_curve(const float *curve, int64_t i, double f) {
+    if (!curve) return 1.0;
+    double lo = (double)curve[i];
+    return lo + ((double)curve[i + 1] - lo) * f;
+}
+
 static inline void controls(const Core *c, int ch, double step, float *G, float *F, int64_t *I) {
     double k = ramp_at(&c->ramps[R_INTENSITY], ch, step);
     double b = ramp_at(&c->ramps[R_BALANCE], ch, step);
+    b = b + ramp_at(&c->ramps[R_TRIM_BAL], ch, step);
     double m = ramp_at(&c->ramps[R_MUTE], ch, step);
     double g = k * c->gain_a;
     g = g + c->gain_b;
@@ -316,6 +351,15 @@ static inline void controls(const Core *c, int ch, double step, float *G, float 
     f = fmin(f, c->idx_max);
     int64_t i = (int64_t)f;
     f = t - f;
+    if (c->tcur[ch] || c->tprev[ch]) {
+        double trim = trim_curve(c->tcur[ch], i, f);
+        double mix = ramp_at(&c->ramps[R_TRIM_MIX], ch, step);
+        if (mix < 1.0) {
+            double before = trim_curve(c->tprev[ch], i, f);
+            trim = before + (trim - before) * mix;
+        }
+        g = g * trim;
+    }
     double lim = c->dpeaks[i] * f;
     lim = lim + c->peaks[i];
     lim = c->limiter / lim;
@@ -372,6 +416,8 @@ static void segment(Core *c, float *out, int64_t stride, const int *colmap, int6
         }
     }
     for (int ch = 0; ch < c->channels; ch++) {
+        const ramps_t *tm = &c->ramps[R_TRIM_MIX];
+        if (c->tprev[ch] && tm->pos[ch] >= tm->len[ch]) c->tprev[ch] = NULL;
         if (!c->vbuf[ch]) continue;
         const ramps_t *vr = &c->ramps[R_VOICE];
         if (c->vpos[ch] >= c->vlen[ch] || (c->vstop[ch] && vr->pos[ch] >= vr->len[ch])) {
@@ -541,7 +587,7 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
     self->max_block = max_block;
     double b0 = fmin(fmax(init_b, lo), hi);
     for (int ch = 0; ch < self->channels; ch++) {
-        double init[N_RAMPS] = {init_k, b0, 1.0, 0.0};
+        double init[N_RAMPS] = {init_k, b0, 1.0, 0.0, 0.0, 1.0};
         for (int k = 0; k < N_RAMPS; k++) {
             self->ramps[k].start[ch] = init[k];
             self->ramps[k].delta[ch] = 0.0;
@@ -696,6 +742,25 @@ static PyObject *Core_read_tap(Core *self, PyObject *arg) {
     return PyLong_FromLongLong(end);
 }
 
+/* (balance offset, trim gain at the bank position of balance 0 + offset) per channel, as the audio thread has them. */
+static PyObject *Core_trim_values(Core *self, PyObject *unused) {
+    PyObject *list = PyList_New(self->channels);
+    if (!list) return NULL;
+    for (int ch = 0; ch < self->channels; ch++) {
+        double off = ramp_value(&self->ramps[R_TRIM_BAL], ch);
+        double t = fmin(fmax(off * self->pos_scale + self->pos_offset, 0.0), self->pos_max);
+        double f = fmin(floor(t), self->idx_max);
+        const float *curve = *(const float *volatile *)&self->tcur[ch];
+        PyObject *v = Py_BuildValue("(dd)", off, trim_curve(curve, (int64_t)f, t - f));
+        if (!v) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, ch, v);
+    }
+    return list;
+}
+
 /* Sequence number of the voice each channel plays (0 = none). */
 static PyObject *Core_voice_ids(Core *self, PyObject *unused) {
     PyObject *list = PyList_New(self->channels);
@@ -822,6 +887,8 @@ static PyMethodDef Core_methods[] = {
     {"read_tap", (PyCFunction)Core_read_tap, METH_O,
      "read_tap(out float32 (frames, channels)) -> end frame: the newest output frames"},
     {"voice_ids", (PyCFunction)Core_voice_ids, METH_NOARGS, "[seq of the playing voice or 0] per channel"},
+    {"trim_values", (PyCFunction)Core_trim_values, METH_NOARGS,
+     "[(balance offset, trim gain at balance 0)] per channel (approximate while gliding)"},
     {"layers", (PyCFunction)Core_layers, METH_NOARGS, "[layer driving the knobs] per channel"},
     {"take_peak", (PyCFunction)Core_take_peak, METH_NOARGS, "peak load since the last call (and reset it)"},
     {"add_underflows", (PyCFunction)Core_add_underflows, METH_O, "count underflows seen by another output"},
@@ -864,6 +931,7 @@ PyMODINIT_FUNC PyInit__core(void) {
     PyModule_AddIntConstant(m, "CMD_CANCEL", CMD_CANCEL);
     PyModule_AddIntConstant(m, "CMD_VOICE", CMD_VOICE);
     PyModule_AddIntConstant(m, "CMD_VOICE_STOP", CMD_VOICE_STOP);
+    PyModule_AddIntConstant(m, "CMD_TRIM", CMD_TRIM);
     PyModule_AddIntConstant(m, "LAYERS", VS_LAYERS);
     PyModule_AddIntConstant(m, "TAP_FRAMES", TAP_FRAMES);
     PyModule_AddIntConstant(m, "MAX_CHANNELS", MAXCH);

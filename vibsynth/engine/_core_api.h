@@ -15,7 +15,8 @@ enum {
     CMD_LAYER = 5,  /* arg = the layer that now drives the channels' knobs */
     CMD_CANCEL = 6, /* arg = layer: drop that layer's commands submitted before this one (immediate only) */
     CMD_VOICE = 7,  /* ptr/ival = float32 samples/length: play once; ptr NULL = set the playing voice's gain */
-    CMD_VOICE_STOP = 8
+    CMD_VOICE_STOP = 8,
+    CMD_TRIM = 9    /* ptr/ival = float32 gain curve over the bank levels (NULL = 1), value = balance offset */
 };
 #define VS_LAYERS 4 /* 0 knobs, 1 follow, 2 sources, 3 clip (engine/commands.py LAYER_NAMES) */
 enum { PUSH_OK = 0, PUSH_RING_FULL = 1, PUSH_SCHEDULE_FULL = 2 };
@@ -30,8 +31,8 @@ typedef struct {
     int64_t seq;
     int32_t layer;    /* CMD_KNOB: the control layer that sent it (0 = direct knob control) */
     int32_t reserved;
-    const float *ptr; /* CMD_VOICE: samples, kept alive by the producer until the voice is done */
-    int64_t ival;     /* CMD_VOICE: number of samples */
+    const float *ptr; /* CMD_VOICE: samples, kept alive by the producer until the voice is done; CMD_TRIM: curve */
+    int64_t ival;     /* CMD_VOICE: number of samples; CMD_TRIM: the curve's length (= bank levels) */
 } vs_cmd_t;
 
 struct vs_core;

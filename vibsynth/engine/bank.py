@@ -28,8 +28,10 @@ Actuator compensation
 ---------------------
 With an :class:`~vibsynth.engine.actuator.ActuatorResponse`, each level's
 magnitudes are multiplied by the boost-limited inverse response, then rescaled so
-that the *felt* spectrum (electrical x actuator) has the 0 dB band level. With the
-flat default both coincide.
+that the *felt* spectrum (electrical x actuator) has the 0 dB intensity level under the
+spec's :class:`~vibsynth.dsp.felt_intensity.IntensityWeighting` (the paper's 80-200 Hz band,
+or a calibrated profile's own weighting). With the flat default and the paper's band both
+coincide.
 
 Disk cache
 ----------
@@ -57,8 +59,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vibsynth.dsp.basis import Basis
+from vibsynth.dsp.felt_intensity import PAPER_WEIGHTING, IntensityWeighting
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
-from vibsynth.dsp.intensity import intensity_response
 from vibsynth.dsp.synthesis import SpectralShaper
 from vibsynth.engine.actuator import ActuatorResponse
 from vibsynth.errors import ParameterError
@@ -66,7 +68,7 @@ from vibsynth.errors import ParameterError
 if TYPE_CHECKING:
     from vibsynth.settings.models_config import Bank
 
-__all__ = ["BankSpec", "NoiseBank", "build_bank", "load_or_build", "default_cache_dir", "CACHE_FORMAT"]
+__all__ = ["BankSpec", "NoiseBank", "build_bank", "felt_spectra", "load_or_build", "default_cache_dir", "CACHE_FORMAT"]
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +95,8 @@ class BankSpec:
     seed : int
         Seed of the shared random phases.
     actuator : ActuatorResponse
+    intensity : IntensityWeighting
+        What the knob's level means: the felt level under this weighting.
     """
 
     fs: float = 48000.0
@@ -102,6 +106,7 @@ class BankSpec:
     levels: int = 49
     seed: int = 1
     actuator: ActuatorResponse = ActuatorResponse()
+    intensity: IntensityWeighting = PAPER_WEIGHTING
 
     def __post_init__(self) -> None:
         for name in ("fs", "loop_seconds", "balance_min", "balance_max"):
@@ -122,9 +127,12 @@ class BankSpec:
             raise ParameterError(f"bank levels must be an integer >= 2, got {self.levels!r}")
 
     @classmethod
-    def from_settings(cls, bank: Bank, fs: float, actuator: ActuatorResponse) -> BankSpec:
+    def from_settings(
+        cls, bank: Bank, fs: float, actuator: ActuatorResponse, intensity: IntensityWeighting = PAPER_WEIGHTING
+    ) -> BankSpec:
         """The spec of the typed ``bank:`` section at sample rate ``fs`` (``audio.rate``), for ``actuator``."""
         return cls(
+            intensity=intensity,
             fs=float(fs),
             loop_seconds=bank.loop_seconds,
             balance_min=bank.balance_min,
@@ -143,8 +151,8 @@ class BankSpec:
         return np.linspace(self.balance_min, self.balance_max, int(self.levels))
 
     def key(self, basis: Basis) -> dict[str, object]:
-        """JSON-able cache key."""
-        return {
+        """JSON-able cache key (the paper's band adds nothing: older caches stay valid)."""
+        key: dict[str, object] = {
             "format": CACHE_FORMAT,
             "basis": basis.id,
             "fs": float(self.fs),
@@ -153,6 +161,9 @@ class BankSpec:
             "seed": int(self.seed),
             "actuator": self.actuator.key(),
         }
+        if not self.intensity.is_paper:
+            key["intensity"] = self.intensity.key()
+        return key
 
 
 @dataclass(frozen=True)
@@ -198,14 +209,13 @@ class NoiseBank:
 
 
 def _felt_power_scale(
-    shaper: SpectralShaper, power: NDArray[np.float64], actuator: ActuatorResponse
+    shaper: SpectralShaper, power: NDArray[np.float64], actuator: ActuatorResponse, intensity: IntensityWeighting
 ) -> NDArray[np.float64]:
-    """Pre-equalise per-bin powers (levels, n_bins) in place, keeping the felt band level."""
+    """Pre-equalise per-bin powers (levels, n_bins) in place; the felt level under ``intensity`` is 0 dB."""
     inverse = actuator.inverse_gain(shaper.freqs) ** 2
     felt = inverse * 10.0 ** (actuator.response_db(shaper.freqs) / 10.0)
-    band = intensity_response(shaper.freqs)
-    before = power @ band
-    after = power @ (band * felt)
+    before = PAPER_WEIGHTING.levels_from_bin_powers(shaper.freqs, power)  # what solve_balance set to 0 dB
+    after = power @ (intensity.power_weights(shaper.freqs) * felt)
     power *= inverse
     power *= (before / after)[:, np.newaxis]
     return power
@@ -231,8 +241,8 @@ def build_bank(basis: Basis, spec: BankSpec, *, progress: Progress | None = None
         progress(0.0, "solving spectra")
     weights = np.stack([shaper.solve_balance(basis, float(b), level_db=0.0) for b in balances])
     power = shaper.power_envelope(weights)
-    if not spec.actuator.is_flat:
-        power = _felt_power_scale(shaper, power, spec.actuator)
+    if not (spec.actuator.is_flat and spec.intensity.is_paper):
+        power = _felt_power_scale(shaper, power, spec.actuator, spec.intensity)
     phasors = shaper.random_phases(np.random.default_rng(spec.seed))
     signals = np.empty((balances.size, spec.n_samples), dtype=np.float32)
     chunk = 8
@@ -243,6 +253,36 @@ def build_bank(basis: Basis, spec: BankSpec, *, progress: Progress | None = None
             progress(stop / balances.size, f"rendered {stop}/{balances.size} levels")
     peaks = np.abs(signals).max(axis=1).astype(np.float64)
     return NoiseBank(signals=signals, balances=balances, peaks=peaks, fs=float(spec.fs), key=spec.key(basis))
+
+
+def felt_spectra(
+    bank: NoiseBank, actuator: ActuatorResponse, *, max_hz: float = 1300.0
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per-bin powers of every bank level as ``actuator`` renders them (electrical x response).
+
+    Parameters
+    ----------
+    bank : NoiseBank
+    actuator : ActuatorResponse
+        The response the bank was equalised for.
+    max_hz : float
+        Bins above are left out (the texture ends at the top band's neighbour, 1172 Hz).
+
+    Returns
+    -------
+    freqs : ndarray, shape (n_bins,)
+    power : ndarray, shape (levels, n_bins)
+        Mean-square power per bin (relative: only ratios matter to the trims).
+    """
+    freqs = np.asarray(np.fft.rfftfreq(bank.n_samples, 1.0 / bank.fs), dtype=np.float64)
+    keep = int(np.searchsorted(freqs, max_hz, side="right"))
+    freqs = freqs[:keep]
+    felt = 10.0 ** (actuator.response_db(freqs) / 10.0)
+    power = np.empty((bank.levels, keep))
+    for i in range(bank.levels):  # one row at a time: a (levels, n/2) complex array would be ~75 MB
+        spectrum = np.fft.rfft(bank.signals[i].astype(np.float64))[:keep]
+        power[i] = (spectrum.real**2 + spectrum.imag**2) * felt
+    return freqs, power
 
 
 def default_cache_dir() -> Path:

@@ -35,6 +35,12 @@ Per channel and per sample:
 7. **Voices**: :meth:`play_buffer` adds a recording, played once, to channels (ramped gain,
    5 ms edge fades, then the limiter's final clip); the lab plays its stimuli this way.
 8. **Output tap**: :meth:`read_output` returns the newest rendered frames (meters, spectra).
+9. **Trims**: :meth:`set_trim` gives channels a calibration trim (a channel whose actuator
+   differs from the one the bank was equalised for, :mod:`vibsynth.dsp.channel_trim`): a
+   balance offset added to the balance knob and a gain read from a curve over the bank's
+   levels at the channel's effective position, both applied after the layers resolved the
+   knobs (direct knobs, follow, sources and clips all get them) and before the limiter; a new
+   trim glides in over ``glide_s`` (50 ms by default). Voices are not trimmed.
 
 Commands
 --------
@@ -72,12 +78,28 @@ from vibsynth.engine import _core
 from vibsynth.engine.bank import NoiseBank
 from vibsynth.engine.commands import LAYER_NAMES, CancelLayer, Command, Panic, SetGlide, SetKnob, SetLayer, SetMute
 from vibsynth.errors import EngineBusyError, ParameterError, ScheduleFullError
-from vibsynth.limits import BANK_LEVELS_MAX, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX, VOICE_GAIN_MAX, VOICE_GLIDE_MAX_S
+from vibsynth.limits import (
+    ACTUATOR_BOOST_MAX_DB,
+    BANK_LEVELS_MAX,
+    MAX_CHANNELS,
+    SCHEDULE_CAPACITY_MAX,
+    VOICE_GAIN_MAX,
+    VOICE_GLIDE_MAX_S,
+)
 
 if TYPE_CHECKING:
     from vibsynth.settings.models_config import Audio, Knobs
 
-__all__ = ["Engine", "EngineStats", "KNOB_FADE_IN", "DEFAULT_SCHEDULE_CAPACITY", "TAP_MAX_FRAMES", "MAX_VOICE_SECONDS"]
+__all__ = [
+    "Engine",
+    "EngineStats",
+    "KNOB_FADE_IN",
+    "DEFAULT_SCHEDULE_CAPACITY",
+    "TAP_MAX_FRAMES",
+    "MAX_VOICE_SECONDS",
+    "TRIM_GLIDE_S",
+    "TRIM_GAIN_MAX_DB",
+]
 
 #: Intensity knobs below this also fade linearly to silence (no step at 0).
 KNOB_FADE_IN = 0.01
@@ -98,6 +120,13 @@ MAX_VOICE_SECONDS = 600.0
 
 #: Voice buffers kept alive at most (each until the audio thread no longer reads it).
 _MAX_VOICE_BUFFERS = 256
+
+#: Default glide of a new trim (s).
+TRIM_GLIDE_S = 0.05
+#: Largest trim gain (dB): the actuator boost limit's ceiling.
+TRIM_GAIN_MAX_DB = ACTUATOR_BOOST_MAX_DB
+#: Distinct trim curves an engine keeps alive (the audio thread may read any it was sent).
+_MAX_TRIM_CURVES = 4096
 
 
 class EngineStats:
@@ -253,6 +282,8 @@ class Engine:
         self.stats = EngineStats(self._core)
         # seq of a CMD_VOICE -> (samples, frame before which the audio thread may not have taken it)
         self._voices: dict[int, tuple[NDArray[np.float32], int]] = {}
+        # trim curves sent to the audio thread, by content (kept for the engine's lifetime)
+        self._trim_curves: dict[bytes, NDArray[np.float32]] = {}
 
     @classmethod
     def from_settings(cls, bank: NoiseBank, knobs: Knobs, audio: Audio) -> Engine:
@@ -433,12 +464,14 @@ class Engine:
             raise ParameterError(f"voice gain must be in [0, {VOICE_GAIN_MAX:g}], got {gain!r}")
         return value
 
-    def _voice_channels(self, channels: tuple[int, ...] | list[int] | None) -> tuple[int, ...] | None:
+    def _voice_channels(
+        self, channels: tuple[int, ...] | list[int] | None, what: str = "voice"
+    ) -> tuple[int, ...] | None:
         if channels is None:
             return None
         chans = tuple(int(c) for c in channels)
         if not chans or any(not 0 <= c < self.channels for c in chans):
-            raise ParameterError(f"voice channels must be in 0..{self.channels - 1}, got {list(channels)!r}")
+            raise ParameterError(f"{what} channels must be in 0..{self.channels - 1}, got {list(channels)!r}")
         return chans
 
     def _collect_voices(self) -> None:
@@ -455,6 +488,66 @@ class Engine:
         for seq, (_, due) in list(self._voices.items()):
             if seq <= applied and frame > due and seq not in playing:
                 del self._voices[seq]
+
+    # ------------------------------------------------------------------ trims
+    def set_trim(
+        self,
+        gain: float | NDArray[np.floating],
+        balance_offset: float = 0.0,
+        *,
+        channels: tuple[int, ...] | list[int] | None = None,
+        glide_s: float = TRIM_GLIDE_S,
+        at_frame: int | None = None,
+    ) -> int:
+        """Give channels a calibration trim (any thread; never blocks). Returns the command's sequence number.
+
+        Parameters
+        ----------
+        gain : float or ndarray, shape (levels,)
+            Linear gain, or one gain per bank level read at the channel's effective bank
+            position (its balance plus the offset), interpolated between levels. Each in
+            ``(0, 10^(TRIM_GAIN_MAX_DB/20)]``; 1 = no gain.
+        balance_offset : float
+            Added to the channel's balance knob (knob units), within the bank's balance span.
+        channels : sequence of int, optional
+            0-based; None = every channel.
+        glide_s : float
+            The new trim blends in over this long (0 = at once), at most ``VOICE_GLIDE_MAX_S``.
+        at_frame : int, optional
+        """
+        curve = np.asarray(gain, dtype=np.float64)
+        if curve.ndim == 0:
+            curve = np.full(self.bank.levels, float(curve))
+        top = 10.0 ** (TRIM_GAIN_MAX_DB / 20.0)
+        if curve.shape != (self.bank.levels,) or not (
+            np.all(np.isfinite(curve)) and np.all((curve > 0) & (curve <= top))
+        ):
+            raise ParameterError(
+                f"a trim gain is a number or {self.bank.levels} numbers (one per bank level), each in "
+                f"(0, {top:g}] (+{TRIM_GAIN_MAX_DB:g} dB)"
+            )
+        span = float(self.bank.balances[-1] - self.bank.balances[0])
+        offset = float(balance_offset)
+        if not (math.isfinite(offset) and abs(offset) <= span):
+            raise ParameterError(f"a trim's balance offset must be within +-{span:g}, got {balance_offset!r}")
+        glide = float(glide_s)
+        if not (math.isfinite(glide) and 0.0 <= glide <= VOICE_GLIDE_MAX_S):
+            raise ParameterError(f"trim glide must be in [0, {VOICE_GLIDE_MAX_S:g}] s, got {glide_s!r}")
+        chans = self._voice_channels(channels, "trim")
+        ptr, length = 0, 0
+        if not np.all(curve == 1.0):
+            data = np.ascontiguousarray(curve, dtype=np.float32)
+            key = data.tobytes()
+            if key not in self._trim_curves:
+                if len(self._trim_curves) >= _MAX_TRIM_CURVES:
+                    raise EngineBusyError(f"{_MAX_TRIM_CURVES} different trims were already sent to this engine")
+                self._trim_curves[key] = data
+            ptr, length = self._trim_curves[key].ctypes.data, data.size
+        return self._push((_core.CMD_TRIM, 0, offset, glide), chans, at_frame, 0, ptr, length)
+
+    def trim_values(self) -> list[tuple[float, float]]:
+        """Per channel, (balance offset, trim gain at balance 0 plus the offset) as the audio thread has them."""
+        return self._core.trim_values()
 
     # ------------------------------------------------------------------ output tap
     def read_output(self, frames: int) -> NDArray[np.float32]:

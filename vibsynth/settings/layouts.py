@@ -1,5 +1,9 @@
 """Actuator layouts: where each output channel's actuator sits, shipped as named files a config can name.
 
+A position may name the actuator profile of its channel (``profile: vest-ch3``): that channel
+is then equalised for its own actuator by a per-channel trim (``actuator.channel_profiles``
+wins over it; :func:`channel_profile_names`).
+
 ``layout: glove`` in the config names a layout file (shipped in ``vibsynth/data/layouts/`` or the
 user's ``layouts/`` folder beside the config file, which wins); ``layout: {1: {x: .., y: ..}}``
 gives the positions inline. A layout file is checked against :class:`LayoutFileModel`; errors
@@ -17,9 +21,21 @@ from pydantic import BeforeValidator, ConfigDict
 from pydantic_core import PydanticCustomError
 
 from vibsynth.errors import ConfigError
-from vibsynth.settings.actuators import named_files
+from vibsynth.settings.actuators import (
+    actuator_profiles,
+    load_actuator_profile,
+    named_files,
+    profile_rate_problem,
+    user_profile_dir,
+)
 from vibsynth.settings.fields import SettingsModel, cross_problem, setting
-from vibsynth.settings.models_config import PROFILE_NAME, ChannelPosition, VibsynthConfig, check_layout
+from vibsynth.settings.models_config import (
+    CHANNEL_PROFILE_FIELD,
+    PROFILE_NAME,
+    ChannelPosition,
+    VibsynthConfig,
+    check_layout,
+)
 from vibsynth.settings.paths import user_config_file
 from vibsynth.settings.typed import settings_of
 from vibsynth.settings.validation import did_you_mean, model_spec, validate
@@ -35,6 +51,8 @@ __all__ = [
     "load_layout",
     "resolve_layout",
     "layout_problem",
+    "channel_profile_names",
+    "channel_profiles_problem",
 ]
 
 LAYOUT_RESOURCE = "layouts"
@@ -78,6 +96,8 @@ class Layout:
     coordinates : list of (x, y, z)
         Their positions in metres, in the order of ``channels``.
     names : list of str or None
+    profiles : list of str or None
+        Each placed channel's own actuator profile (None: ``actuator.profile``).
     """
 
     def __init__(self, positions: Mapping[int, ChannelPosition], name: str | None = None) -> None:
@@ -86,6 +106,7 @@ class Layout:
         self.channels = tuple(channel - 1 for channel, _ in ordered)
         self.coordinates = [(p.x, p.y, p.z) for _, p in ordered]
         self.names = [p.name for _, p in ordered]
+        self.profiles = [p.profile for _, p in ordered]
 
     def describe(self) -> str:
         """``layout glove (6 actuators)`` or ``inline layout (4 actuators)``."""
@@ -161,7 +182,7 @@ def layout_problem(config: VibsynthConfig) -> PydanticCustomError | None:
     """
     value = config.layout
     if not isinstance(value, str):
-        return None
+        return channel_profiles_problem(config)
     channels = config.audio.channels
     files = layout_files()
     if value not in files:
@@ -178,4 +199,91 @@ def layout_problem(config: VibsynthConfig) -> PydanticCustomError | None:
             "layout",
             "audio.channels",
         )
+    return channel_profiles_problem(config)
+
+
+def channel_profiles_problem(config: VibsynthConfig) -> PydanticCustomError | None:
+    """What is wrong with the channels' own actuator profiles, or None.
+
+    One of the loader's file checks (:func:`layout_problem` runs it): ``actuator.channel_profiles``
+    longer than ``audio.channels``; a channel naming no profile file; a profile measured at
+    another rate; measured (absolute) and relative profiles mixed among the channels (their
+    responses cannot be compared).
+    """
+    pattern = config.actuator.channel_profiles
+    channels = config.audio.channels
+    if isinstance(pattern, list) and len(pattern) > channels:
+        return cross_problem(
+            f"actuator.channel_profiles lists {len(pattern)} channels but audio.channels = {channels} "
+            f"(allowed: up to {channels} entries)",
+            "actuator.channel_profiles",
+            "audio.channels",
+        )
+    try:
+        names = channel_profile_names(config)
+    except ConfigError:
+        return None  # a broken layout file says so, with its line, where it is read
+    if not any(names):
+        return None
+    key = "actuator.channel_profiles" if pattern is not None else "layout"
+    where = key
+    if pattern is None and isinstance(config.layout, str):
+        where = f"layout {config.layout} ({layout_files().get(config.layout, '?')})"
+    available = actuator_profiles()
+    kinds: dict[bool, list[str]] = {}
+    for channel, name in enumerate(names, start=1):
+        if name is None:
+            if config.actuator.response is not None:
+                kinds.setdefault(False, []).append(f"{channel} (actuator.response)")
+                continue
+            name = config.actuator.profile
+            if name is None or name not in available:
+                kinds.setdefault(False, []).append(f"{channel} ({name or 'flat'})")
+                continue
+        elif name not in available:
+            return cross_problem(
+                f"{where}: channel {channel}'s profile {name!r} does not exist (allowed: "
+                f"{', '.join(sorted(available)) or 'none found'}; user profiles go in {user_profile_dir()}; "
+                f"calibrate response --channels all -o NAME writes NAME-ch1, NAME-ch2, ...)",
+                key,
+            )
+        try:
+            profile = load_actuator_profile(name)
+        except ConfigError:
+            return None  # a broken profile file says so, with its line, where it is read
+        rate = profile_rate_problem(profile, config.audio.rate)
+        if rate is not None:
+            return cross_problem(f"{where}: channel {channel}: {rate}", key, "audio.rate")
+        kinds.setdefault(bool(profile["absolute"]), []).append(f"{channel} ({name})")
+    if len(kinds) > 1:
+        return cross_problem(
+            f"{where}: channels {', '.join(kinds[True])} have measured (absolute) profiles but channels "
+            f"{', '.join(kinds[False])} relative ones: their responses cannot be compared (allowed: every channel "
+            "measured with one sensor chain, calibrate response --channels all, or every channel relative)",
+            key,
+            "actuator.profile",
+        )
     return None
+
+
+def channel_profile_names(config: VibsynthConfig | Any) -> list[str | None]:
+    """Each output channel's own actuator profile name (0-based list, ``audio.channels`` long).
+
+    ``actuator.channel_profiles`` wins (a pattern: ``vest-ch{n}`` -> ``vest-ch1``, ...; a list:
+    channel 1 first, shorter lists leave the rest None); else the layout's per-position
+    ``profile``; None = the channel uses ``actuator.profile`` (no trim).
+    """
+    settings = settings_of(config)
+    channels = settings.audio.channels
+    value = settings.actuator.channel_profiles
+    if isinstance(value, str):
+        return [value.replace(CHANNEL_PROFILE_FIELD, str(n)) for n in range(1, channels + 1)]
+    if isinstance(value, list):
+        return [value[c] if c < len(value) else None for c in range(channels)]
+    names: list[str | None] = [None] * channels
+    layout = resolve_layout(settings)
+    if layout is not None:
+        for channel, profile in zip(layout.channels, layout.profiles, strict=True):
+            if channel < channels:
+                names[channel] = profile
+    return names

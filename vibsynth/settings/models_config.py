@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
@@ -167,6 +168,29 @@ class Knobs(Section):
     initial_balance: float = setting(0.0, "balance before any control arrives", unit="(knob units)", ge=-10, le=10)
 
 
+#: ``actuator.channel_profiles`` as a pattern: ``{n}`` stands for the 1-based channel number.
+CHANNEL_PROFILE_FIELD = "{n}"
+
+
+def check_channel_profiles(value: Any) -> Any:
+    """``actuator.channel_profiles``: null, a name pattern with ``{n}``, or a list of profile names or nulls."""
+    if value is None:
+        return value
+    if isinstance(value, str):
+        if value.count(CHANNEL_PROFILE_FIELD) != 1 or not re.match(PROFILE_NAME, value.replace("{n}", "1")):
+            raise problem(
+                f"{value!r} is not a profile name pattern: it needs {{n}} once (the channel number) in a profile "
+                "name of letters, digits, . _ - (e.g. vest-ch{n})"
+            )
+        return value
+    if not isinstance(value, list) or not 1 <= len(value) <= MAX_CHANNELS:
+        raise problem(f"must be a name pattern like vest-ch{{n}} or a list of 1..{MAX_CHANNELS} profile names or nulls")
+    for i, name in enumerate(value):
+        if name is not None and not (isinstance(name, str) and re.match(PROFILE_NAME, name)):
+            raise problem(f"channel {i + 1}: {name!r} is not a profile name (letters, digits, . _ -) or null", i)
+    return value
+
+
 class Actuator(Section):
     """``actuator:``: the actuator's frequency response, equalised by the bank."""
 
@@ -187,6 +211,13 @@ class Actuator(Section):
         unit="dB",
         ge=0,
         le=ACTUATOR_BOOST_MAX_DB,
+    )
+    channel_profiles: Annotated[str | list[str | None] | None, BeforeValidator(check_channel_profiles)] = setting(
+        None,
+        "each output channel's own profile (equalised by a per-channel trim): a pattern with {n} for the channel "
+        "number (vest-ch{n}, as calibrate response --channels all -o vest writes), or a list (channel 1 first; "
+        "null = actuator.profile); null = the layout's per-channel profiles, if any",
+        allowed="a profile name pattern with {n}, a list of profile names or nulls, or null",
     )
 
 
@@ -346,6 +377,12 @@ class ChannelPosition(ValueModel):
         allowed="lower-case letters and digits in words joined by '-' (e.g. thumb, back-3-2), up to 32 characters",
         pattern=CHANNEL_NAME,
         max_length=32,
+    )
+    profile: str | None = setting(
+        None,
+        "this channel's own actuator profile (equalised by a per-channel trim); null = actuator.profile",
+        allowed="a profile name (letters, digits, . _ -) or null",
+        pattern=PROFILE_NAME,
     )
 
 
