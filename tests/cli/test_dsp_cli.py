@@ -352,3 +352,33 @@ def test_progress_bar_redraws_at_most_10_times_a_second():
         progress(1000, 1000)
         progress.close()
     assert silent.getvalue() == ""
+
+
+def test_analyze_profile_reports_the_calibrated_intensity(tmp_path, capsys, monkeypatch, rng):
+    import yaml
+
+    from vibsynth.dsp.felt_intensity import profile_weighting
+    from vibsynth.dsp.intensity import intensity_level_db
+    from vibsynth.formats.recordings import write_wav
+
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "cfg"))
+    folder = tmp_path / "cfg" / "vibsynth" / "actuators"
+    folder.mkdir(parents=True)
+    response = [[10.0, -20.0], [60.0, 6.0], [150.0, 0.0], [1000.0, 0.0]]
+    weighting = [[10.0, -40.0], [100.0, -20.0], [300.0, 0.0], [600.0, -20.0], [1000.0, -40.0]]
+    doc = {"name": "dev", "absolute": True, "response": response, "weighting": weighting, "band_hz": [250, 360]}
+    (folder / "dev.yaml").write_text(yaml.safe_dump(doc))
+    wav = tmp_path / "a.wav"
+    x = rng.standard_normal(24000) * 0.05
+    write_wav(wav, x, 8000.0)
+    assert main(["analyze", str(wav), "--profile", "dev", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)[0]
+    want = profile_weighting(response, weighting, [250, 360]).level_db(x.astype(np.float32), fs=8000.0)
+    assert row["level_db"] == pytest.approx(want, abs=0.01)
+    assert abs(row["level_db"] - intensity_level_db(x, fs=8000.0)) > 0.5
+    assert row["intensity"] == "250-360 Hz (profile dev's weighting)"
+    assert main(["analyze", str(wav), "--profile", "dev"]) == 0
+    assert "level: intensity in 250-360 Hz (profile dev's weighting)" in capsys.readouterr().out
+    assert main(["analyze", str(wav), "--profile", "nope"]) != 0
+    err = capsys.readouterr().err
+    assert err.startswith("vibsynth: error: unknown actuator profile 'nope'") and "Traceback" not in err

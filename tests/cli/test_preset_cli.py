@@ -304,3 +304,52 @@ def test_rm_deletes_user_presets_only(capsys, isolated):
     assert code == 0 and "the shipped preset of that name is used again" in out
     code, _, err = run(capsys, "preset", "rm", "nothing-like-it")
     assert code == 2 and "unknown preset" in err
+
+
+def _calibrated_profile(folder, name="coil", rate=8000):
+    """A measured profile as calibrate writes it (a 90 Hz resonance, the model curve's weighting and band)."""
+    import yaml
+
+    from vibsynth.app.calibrate import profile_band
+
+    f = np.geomspace(5.0, 2000.0, 120)
+    r = 8 * np.exp(-0.5 * (np.log2(f / 90) / 0.5) ** 2) - 10 * np.log10(1 + (20 / f) ** 4) - 4
+    response = [[float(a), round(float(b), 3)] for a, b in zip(f, r, strict=True)]
+    weighting, band = profile_band(response)
+    folder.mkdir(parents=True, exist_ok=True)
+    doc = {"name": name, "absolute": True, "rate": rate, "response": response, "weighting": weighting, "band_hz": band}
+    (folder / f"{name}.yaml").write_text(yaml.safe_dump(doc))
+    return np.array(response)
+
+
+def test_from_recording_with_a_calibrated_profile_renders_its_felt_intensity(capsys, tmp_path, isolated, basis, rng):
+    """The preset's level is measured in the profile's weighting, the level the engine's knob then means."""
+    from vibsynth.settings.actuators import profile_intensity
+
+    points = _calibrated_profile(tmp_path / "cfg" / "vibsynth" / "actuators")
+    weighting = profile_intensity("coil")
+    recording = tmp_path / "felt.wav"
+    write_wav(recording, _texture(basis, rng, balance=0.3, knob=0.6), FS)
+    code, _, err = run(capsys, "preset", "from-recording", str(recording), "--name", "felt", "--profile", "coil")
+    assert code == 0, err
+    preset = load_preset(isolated / "felt.yaml")
+    truth = analyze(read_recording(recording).samples, fs=FS, basis=basis, weighting=weighting)
+    assert preset.intensity == pytest.approx(truth.intensity_knob, abs=1e-3)
+    assert preset.provenance["intensity"] == weighting.describe() and "coil's weighting" in weighting.describe()
+    paper = analyze(read_recording(recording).samples, fs=FS, basis=basis)
+    assert abs(truth.level_db - paper.level_db) > 0.05  # the option changes what is measured (a little here)
+
+    out = tmp_path / "drive.wav"
+    code, _, err = run(
+        capsys, "preset", "play", "felt", "--seconds", "4", "-o", str(out), *FAST,
+        "--set", "actuator.profile=coil", "--set", "actuator.max_boost_db=40",
+    )  # fmt: skip
+    assert code == 0, err
+    drive = read_recording(out).samples[int(2 * FS) :]  # one 2 s loop after the glide
+    spectrum = np.fft.rfft(drive)
+    freqs = np.fft.rfftfreq(drive.size, 1 / FS)
+    gain = 10 ** (np.interp(np.log(np.maximum(freqs, 1.0)), np.log(points[:, 0]), points[:, 1]) / 20)
+    felt = np.fft.irfft(spectrum * gain, n=drive.size)  # what the actuator does
+    again = analyze(felt, fs=FS, basis=basis, weighting=weighting)
+    assert again.intensity_knob == pytest.approx(truth.intensity_knob, abs=0.3 / 40)  # 0.3 dB
+    assert again.balance == pytest.approx(truth.balance, abs=0.06)

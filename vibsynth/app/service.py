@@ -28,7 +28,6 @@ from typing import Any
 from vibsynth.control import adapter_modules
 from vibsynth.control.controller import Controller
 from vibsynth.dsp.basis import Basis
-from vibsynth.dsp.felt_intensity import PAPER_WEIGHTING, IntensityWeighting, profile_weighting
 from vibsynth.engine.actuator import ActuatorResponse
 from vibsynth.engine.bank import BankSpec, load_or_build
 from vibsynth.engine.commands import SetMute
@@ -37,7 +36,13 @@ from vibsynth.engine.outputs import NullOutput, OutputBackend, SoundDeviceOutput
 from vibsynth.engine.supervisor import STREAMING, ExitGuard, hard_exit
 from vibsynth.engine.trims import ChannelActuator, apply_trims, derive_trims, mean_response
 from vibsynth.errors import ConfigError, DeviceError, ParameterError, VibsynthError
-from vibsynth.settings.actuators import load_actuator_profile, resolve_actuator_absolute, resolve_actuator_response
+from vibsynth.settings.actuators import (
+    config_intensity,
+    load_actuator_profile,
+    profile_intensity,
+    resolve_actuator_absolute,
+    resolve_actuator_response,
+)
 from vibsynth.settings.layouts import channel_profile_names
 from vibsynth.settings.models_config import Audio, VibsynthConfig
 
@@ -46,7 +51,6 @@ __all__ = [
     "open_output",
     "serve",
     "actuator_from_settings",
-    "intensity_from_settings",
     "channel_actuators",
     "status_line",
 ]
@@ -66,19 +70,6 @@ def actuator_from_settings(settings: VibsynthConfig) -> ActuatorResponse:
     )
 
 
-def _profile_intensity(name: str) -> IntensityWeighting:
-    profile = load_actuator_profile(name)
-    return profile_weighting(profile["response"], profile["weighting"], profile["band_hz"], source=f"profile {name}")
-
-
-def intensity_from_settings(settings: VibsynthConfig) -> IntensityWeighting:
-    """What the knob's level means for ``actuator:``: a calibrated profile's own weighting, else the paper's band."""
-    actuator = settings.actuator
-    if actuator.response is not None or actuator.profile is None:
-        return PAPER_WEIGHTING
-    return _profile_intensity(actuator.profile)
-
-
 def channel_actuators(settings: VibsynthConfig) -> list[ChannelActuator] | None:
     """Each channel's actuator when some channel has its own profile (else None: one profile for all).
 
@@ -87,9 +78,7 @@ def channel_actuators(settings: VibsynthConfig) -> list[ChannelActuator] | None:
     names = channel_profile_names(settings)
     if not any(names):
         return None
-    base = ChannelActuator(
-        settings.actuator.profile, actuator_from_settings(settings), intensity_from_settings(settings)
-    )
+    base = ChannelActuator(settings.actuator.profile, actuator_from_settings(settings), config_intensity(settings))
     out = []
     for name in names:
         if name is None:
@@ -99,7 +88,7 @@ def channel_actuators(settings: VibsynthConfig) -> list[ChannelActuator] | None:
         response = ActuatorResponse.from_points(
             profile["response"], max_boost_db=settings.actuator.max_boost_db, absolute=bool(profile["absolute"])
         )
-        out.append(ChannelActuator(name, response, _profile_intensity(name)))
+        out.append(ChannelActuator(name, response, profile_intensity(name)))
     return out
 
 
@@ -132,7 +121,7 @@ def build_engine(
         basis = default_basis()
     channels = channel_actuators(settings)
     if channels is None:
-        reference, intensity = actuator_from_settings(settings), intensity_from_settings(settings)
+        reference, intensity = actuator_from_settings(settings), config_intensity(settings)
     else:
         reference = mean_response([c.response for c in channels])
         intensity = channels[0].intensity

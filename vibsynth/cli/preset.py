@@ -226,9 +226,17 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
     recording = read_recording(args.file, fs=args.rate, channel=args.channel)
     basis = load_basis(args.basis) if args.basis else default_basis()
     knobs = settings.knobs
+    from vibsynth.settings.actuators import config_intensity, profile_intensity
+
+    weighting = profile_intensity(args.profile) if args.profile else config_intensity(settings)
     try:
         result = analyze(
-            recording.samples, fs=recording.fs, basis=basis, ceiling_db=knobs.ceiling_db, range_db=knobs.range_db
+            recording.samples,
+            fs=recording.fs,
+            basis=basis,
+            ceiling_db=knobs.ceiling_db,
+            range_db=knobs.range_db,
+            weighting=weighting,
         )
     except ParameterError as exc:
         raise PresetError(f"{recording.path}: {exc}") from None
@@ -248,6 +256,7 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
             glide_ms=args.glide_ms,
             program=args.program,
             tags=args.tags or (),
+            intensity_weighting=None if weighting.is_paper else weighting.describe(),
         )
     except PresetError as exc:  # a value typed on the command line
         raise ParameterError(str(exc)) from None
@@ -378,6 +387,12 @@ def register(subparsers: Any) -> None:
         "--channel", type=wav_channel, default=0, metavar="N", help="channel of a multi-channel WAV (1 = the first)"
     )
     p.add_argument("--basis", type=Path, help="spectral basis YAML (default: the shipped basis)")
+    p.add_argument(
+        "--profile",
+        metavar="NAME",
+        help="measure intensity as on this actuator profile's device (its calibrated weighting; default: the "
+        "config's actuator.profile, whose weighting the engine's knob uses)",
+    )
     add_common_new(p)
     p.set_defaults(func=cmd_from_recording)
 

@@ -16,12 +16,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vibsynth.dsp.basis import Basis, to_db
+from vibsynth.dsp.felt_intensity import PAPER_WEIGHTING, IntensityWeighting
 from vibsynth.dsp.filterbank import band_powers_from_bin_powers, bin_powers, validate_signal
 from vibsynth.dsp.intensity import (
     DEFAULT_CEILING_DB,
     DEFAULT_RANGE_DB,
     SILENCE_DB,
-    intensity_level_from_bin_powers,
     level_db_to_knob,
     non_stationarity_db,
 )
@@ -49,7 +49,8 @@ class Analysis:
     Attributes
     ----------
     level_db : float
-        Intensity: 80-200 Hz Butterworth band level, dB re unit RMS.
+        Intensity: the felt level under the weighting (by default the paper's 80-200 Hz
+        Butterworth band level), dB re unit RMS.
     intensity_knob : float
         The knob value that renders this level under the given mapping (not clamped:
         outside [0, 1] means outside the knob's range).
@@ -95,6 +96,7 @@ def analyze(
     basis: Basis,
     ceiling_db: float = DEFAULT_CEILING_DB,
     range_db: float = DEFAULT_RANGE_DB,
+    weighting: IntensityWeighting = PAPER_WEIGHTING,
 ) -> Analysis:
     """Analyse a stationary vibration recording.
 
@@ -108,6 +110,9 @@ def analyze(
         Spectral basis giving M and V1..V8.
     ceiling_db, range_db : float
         Intensity knob mapping used for ``intensity_knob``.
+    weighting : IntensityWeighting
+        What intensity means (:mod:`vibsynth.dsp.felt_intensity`): the paper's band, or a
+        calibrated device's own weighting; the recording is taken as the felt signal.
 
     Returns
     -------
@@ -122,7 +127,7 @@ def analyze(
     arr = validate_signal(x, fs=fs, min_seconds=MIN_DURATION_S)
     freqs, power = bin_powers(arr, fs=fs)
     bands = band_powers_from_bin_powers(freqs, power, centres=basis.centres_hz, order=basis.filter_order)
-    level = intensity_level_from_bin_powers(freqs, power)
+    level = weighting.level_from_bin_powers(freqs, power)
     if level <= SILENCE_DB or not np.all(bands > 0) or 10 * math.log10(bands.max()) <= SILENCE_DB:
         raise ParameterError("signal is silent: no power in the 10-1000 Hz bands")
     band_db = to_db(bands)

@@ -12,7 +12,8 @@ from typing import Any
 
 from pydantic_core import PydanticCustomError
 
-from vibsynth.errors import ConfigError
+from vibsynth.dsp.felt_intensity import PAPER_WEIGHTING, IntensityWeighting, profile_weighting
+from vibsynth.errors import ConfigError, ParameterError
 from vibsynth.settings.fields import cross_problem
 from vibsynth.settings.models_config import VibsynthConfig
 from vibsynth.settings.models_preset import ActuatorProfileModel
@@ -31,6 +32,8 @@ __all__ = [
     "resolve_actuator_absolute",
     "profile_problem",
     "profile_rate_problem",
+    "profile_intensity",
+    "config_intensity",
 ]
 
 ACTUATOR_RESOURCE = "config/actuators"
@@ -148,6 +151,31 @@ def profile_problem(config: VibsynthConfig) -> PydanticCustomError | None:
         f"{', '.join(sorted(names)) or 'none found'}, or null; user profiles go in {user_profile_dir()})",
         "actuator.profile",
     )
+
+
+def profile_intensity(name: str) -> IntensityWeighting:
+    """What intensity means on profile ``name``'s device: its calibrated weighting, else the paper's band.
+
+    Raises
+    ------
+    ConfigError
+        No such profile, or a broken one (its weighting or band).
+    """
+    profile = load_actuator_profile(name)
+    try:
+        return profile_weighting(
+            profile["response"], profile["weighting"], profile["band_hz"], source=f"profile {name}"
+        )
+    except ParameterError as exc:
+        raise ConfigError(f"{profile['file']}: {exc}") from None
+
+
+def config_intensity(config: VibsynthConfig | Any) -> IntensityWeighting:
+    """What the intensity knob's level means for the config's ``actuator:`` (explicit points: the paper's band)."""
+    actuator = settings_of(config).actuator
+    if actuator.response is not None or actuator.profile is None:
+        return PAPER_WEIGHTING
+    return profile_intensity(actuator.profile)
 
 
 def resolve_actuator_absolute(config: VibsynthConfig | Any) -> bool:

@@ -58,6 +58,7 @@ def preset_from_analysis(
     glide_ms: float | None = None,
     program: int | None = None,
     tags: Sequence[str] = (),
+    intensity_weighting: str | None = None,
 ) -> RecordingPreset:
     """The preset whose knobs render an analysed recording.
 
@@ -77,6 +78,9 @@ def preset_from_analysis(
         What made it (``preset from-recording``, ``studio``).
     description, glide_ms, program, tags
         Preset fields (default description: ``From the recording <file>.``).
+    intensity_weighting : str, optional
+        What the analysis' level meant when not the paper's band (a calibrated profile's
+        weighting, ``IntensityWeighting.describe()``): recorded as ``provenance.intensity``.
 
     Raises
     ------
@@ -116,6 +120,8 @@ def preset_from_analysis(
         "basis_id": basis_id,
         "created_by": f"vibsynth {__version__} ({created_by})",
     }
+    if intensity_weighting is not None:
+        provenance["intensity"] = intensity_weighting
     preset = Preset(
         name=name,
         intensity=round(intensity, 4),
