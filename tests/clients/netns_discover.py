@@ -7,33 +7,20 @@ over OSCQuery and OSC).
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import vibsynth
 from tests.clients.mono import run_mono
+from tests.netns import start_serve
 
 NAME = "vibsynth csharp"
 
 
 def main(folder: str, exe: str) -> None:
-    cfg = Path(folder) / "config.yaml"
-    cfg.write_text(
-        "osc: {port: 9570}\nstudio: {enabled: false}\nmidi: {enabled: false}\n"
-        f"discovery: {{name: '{NAME}', interfaces: ['127.0.0.1'], oscquery_port: 9572}}\n"
-    )
-    serve = subprocess.Popen(
-        [sys.executable, "-m", "vibsynth", "serve", "--config", str(cfg), "--output", "null", "--seconds", "60"],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    serve, _ = start_serve(folder, NAME)
     try:
-        assert serve.stdout is not None
-        for line in serve.stdout:
-            if line.startswith("oscquery: "):
-                break
         osc = vibsynth.Client("127.0.0.1", 9570)
         osc.send("/vibsynth/intensity", 0.375)
         osc.sync()

@@ -10,35 +10,21 @@ import json
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 from pythonoscquery.osc_query_browser import OSCQueryBrowser
 from pythonoscquery.osc_query_client import OSCQueryClient
 
 import vibsynth
+from tests.netns import start_serve
 from vibsynth.control.oscquery.discovery import Advertiser
 
 NAME = "vibsynth netns"
 
 
 def main(folder: str) -> None:
-    cfg = Path(folder) / "config.yaml"
-    cfg.write_text(
-        "osc: {port: 9570}\nstudio: {enabled: false}\nmidi: {enabled: false}\n"
-        f"discovery: {{name: '{NAME}', interfaces: ['127.0.0.1'], oscquery_port: 9572}}\n"
-    )
-    serve = subprocess.Popen(
-        [sys.executable, "-m", "vibsynth", "serve", "--config", str(cfg), "--output", "null", "--seconds", "40"],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    out: dict = {}
+    serve, banner = start_serve(folder, NAME, seconds=40)
+    out: dict = {"banner": banner}
     try:
-        assert serve.stdout is not None
-        for line in serve.stdout:
-            if line.startswith("oscquery: "):
-                out["banner"] = line.strip()
-                break
         browser = OSCQueryBrowser()
         service, deadline = None, time.monotonic() + 20.0
         while service is None and time.monotonic() < deadline:  # mDNS probing and announcing take a while

@@ -8,36 +8,17 @@ counted, the first keeps answering.
 
 from __future__ import annotations
 
-import json
-import os
-import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.skipif(
-    os.geteuid() != 0 or shutil.which("unshare") is None or shutil.which("ip") is None,
-    reason="needs root, unshare and ip (iproute2) to make a network namespace",
-)
+from tests.netns import NETNS, run_in_netns
 
-SETUP = "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo"
+pytestmark = NETNS
 
 
 def test_python_oscquery_browses_the_service_in_a_private_namespace(tmp_path: Path):
-    peer = Path(__file__).with_name("netns_peer.py")
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[3])}
-    env.pop("VIBSYNTH_CONFIG", None)
-    result = subprocess.run(
-        ["unshare", "-n", "bash", "-c", f'{SETUP} && exec "$0" "$1" "$2"', sys.executable, str(peer), str(tmp_path)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env=env,
-    )
-    assert result.returncode == 0, result.stderr[-3000:]
-    out = json.loads(result.stdout.strip().splitlines()[-1])
+    out = run_in_netns(Path(__file__).with_name("netns_peer.py"), tmp_path, timeout=120)
     assert out["banner"] == "oscquery: http://127.0.0.1:9572/"
     assert out["host_info"] == {"name": "vibsynth netns", "osc_ip": "127.0.0.1", "osc_port": 9570}
     assert "/vibsynth/ch/1/intensity" in out["paths"] and "/vibsynth/status" in out["paths"]

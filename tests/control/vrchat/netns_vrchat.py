@@ -11,15 +11,14 @@ from __future__ import annotations
 
 import json
 import socket
-import subprocess
 import sys
 import threading
 import time
 import urllib.request
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from pathlib import Path
 
 import vibsynth
+from tests.netns import start_serve
 from vibsynth.control.osc.codec import encode_message
 from vibsynth.control.oscquery.discovery import Advertiser, discover
 
@@ -51,23 +50,10 @@ def main(folder: str) -> None:
     threading.Thread(target=http.serve_forever, daemon=True).start()
     advertiser = Advertiser(VRCHAT, 9123, http.server_address[1], ["127.0.0.1"])
     advertiser.start()
-    cfg = Path(folder) / "config.yaml"
-    cfg.write_text(
-        "osc: {port: 9570}\nstudio: {enabled: false}\nmidi: {enabled: false}\n"
-        "discovery: {name: vibsynth vest, interfaces: ['127.0.0.1'], oscquery_port: 9572}\n"
-        "vrchat: {enabled: true, listen_port: 9001, parameters: [{name: Hug, channel: 1}]}\n"
-    )
-    serve = subprocess.Popen(
-        [sys.executable, "-m", "vibsynth", "serve", "--config", str(cfg), "--output", "null", "--seconds", "60"],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    vrchat = "vrchat: {enabled: true, listen_port: 9001, parameters: [{name: Hug, channel: 1}]}\n"
+    serve, _ = start_serve(folder, "vibsynth vest", extra=vrchat)
     out: dict = {}
     try:
-        assert serve.stdout is not None
-        for line in serve.stdout:
-            if line.startswith("oscquery: "):
-                break
         # VRChat's side: browse, keep the services whose tree has /avatar, send to their OSC port
         deadline = time.monotonic() + 30.0
         targets: list = []
