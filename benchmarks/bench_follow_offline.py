@@ -21,11 +21,9 @@ Run: ``python benchmarks/bench_follow_offline.py [--long] [--seconds 60,600] [--
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
@@ -35,15 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import bench_render  # noqa: E402
-from bench_render import machine, run_case  # noqa: E402
-
-# The child also reports its CPU time: on a shared machine the wall time measures the neighbours too.
-_WALL = '"wall_s": wall,'
-assert _WALL in bench_render.CHILD
-bench_render.CHILD = bench_render.CHILD.replace(
-    _WALL, _WALL + ' "cpu_s": sum(resource.getrusage(resource.RUSAGE_SELF)[:2]),'
-)
+from bench_render import measure, run_case, save_run, write_config  # noqa: E402
 
 from vibsynth.formats.wav_stream import WavStreamWriter  # noqa: E402
 
@@ -105,8 +95,7 @@ def main() -> int:
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="bench_follow_offline-") as tmp:
         work = Path(tmp)
-        config = work / "config.yaml"
-        config.write_text(f"audio:\n  rate: {RATE}\nbank:\n  cache_dir: {work / 'banks'}\n")
+        config = write_config(work)
         warm = work / "warm.wav"
         write_input(warm, 1.0)
         run_case(
@@ -119,13 +108,10 @@ def main() -> int:
                 if kind.startswith("clip") and seconds > 600:
                     continue
                 argv, out = case_args(kind, src, work, config)
-                result = run_case(argv, None, work)
-                result.update(kind=kind, seconds=seconds)
+                result = measure(kind, seconds, argv, out, None, work)
                 if "wall_s" in result and result.get("code") == 0:
                     result["x_real_time"] = round(seconds / result["wall_s"], 1)
                     result["x_real_time_cpu"] = round(seconds / result["cpu_s"], 1)
-                if out.exists():
-                    out.unlink()
                 rows.append(result)
                 status = f"ERROR {result['error']}" if result.get("code") else ""
                 print(
@@ -135,17 +121,16 @@ def main() -> int:
                     flush=True,
                 )
             src.unlink()
-    data: dict[str, Any] = json.loads(args.json.read_text()) if args.json.exists() else {}
-    data.setdefault("runs", {})[args.label] = {
-        "machine": machine(),
-        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-        "settings": f"input {RATE} Hz mono pcm16 noise (level steps, clicks); output {RATE} Hz float32; "
-        f"{'one core (CPU affinity)' if pinned else 'not pinned'}, 1 BLAS thread; bank from a warm cache",
-        "target_x_real_time": TARGET_X,
-        "cases": rows,
-    }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(data, indent=2) + "\n")
+    save_run(
+        args.json,
+        args.label,
+        {
+            "settings": f"input {RATE} Hz mono pcm16 noise (level steps, clicks); output {RATE} Hz float32; "
+            f"{'one core (CPU affinity)' if pinned else 'not pinned'}, 1 BLAS thread; bank from a warm cache",
+            "target_x_real_time": TARGET_X,
+            "cases": rows,
+        },
+    )
     print(f"\n{'kind':17s} {'seconds':>8s} {'x rt (wall)':>12s} {'x rt (cpu)':>11s} {'peak RSS MB':>12s}")
     for r in rows:
         x = f"{r['x_real_time']:.1f}" if "x_real_time" in r else "-"

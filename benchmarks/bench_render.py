@@ -1,8 +1,9 @@
 """Offline rendering to WAV: peak memory and wall time of the one renderer, per kind and length.
 
 Each case runs the command line in its own child process, which reports its peak RSS
-(``resource.getrusage(RUSAGE_SELF).ru_maxrss``) and the wall time of ``main()`` (bank
-loaded from a warm cache; imports excluded). Kinds, all at 48 kHz, mono float32:
+(``resource.getrusage(RUSAGE_SELF).ru_maxrss``), the wall time of ``main()`` (bank
+loaded from a warm cache; imports excluded) and its CPU time (user + system, imports
+included). Kinds, all at 48 kHz, mono float32:
 
 * ``texture``  ``vibsynth render --balance 0.3 --intensity 0.8`` (closed-form synthesis, one period repeated)
 * ``midi``     ``vibsynth render --midi`` of a generated file: notes and a CC 74 move every 50 ms
@@ -52,8 +53,9 @@ CHILD = textwrap.dedent(
     except BaseException as exc:  # an old loop may fail (e.g. a full schedule): record it
         code, error = -1, f"{type(exc).__name__}: {exc}"
     wall = time.perf_counter() - started
-    print(json.dumps({"code": code, "error": error, "wall_s": wall,
-                      "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    print(json.dumps({"code": code, "error": error, "wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime,
+                      "peak_rss_mb": usage.ru_maxrss / 1024}))
     """
 )
 
@@ -134,6 +136,31 @@ def run_case(args: list[str], code_dir: Path | None, cwd: Path) -> dict[str, Any
     return result
 
 
+def measure(kind: str, seconds: float, args: list[str], out: Path, code_dir: Path | None, cwd: Path) -> dict[str, Any]:
+    """One case: :func:`run_case`, labelled with its kind and length, the output's size noted and the output removed."""
+    result = run_case(args, code_dir, cwd)
+    result.update(kind=kind, seconds=seconds)
+    if out.exists():
+        result["file_mb"] = round(out.stat().st_size / 2**20, 1)
+        out.unlink()
+    return result
+
+
+def write_config(work: Path) -> Path:
+    """A config in ``work`` at :data:`RATE`, its bank cache in ``work/banks`` (warmed once, loaded by every case)."""
+    config = work / "config.yaml"
+    config.write_text(f"audio:\n  rate: {RATE}\nbank:\n  cache_dir: {work / 'banks'}\n")
+    return config
+
+
+def save_run(path: Path, label: str, run: dict[str, Any]) -> None:
+    """Store ``run`` (with the machine and the date) as ``runs[label]`` of the JSON file; other labels are kept."""
+    data: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
+    data.setdefault("runs", {})[label] = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M:%S"), **run}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=2) + "\n")
+
+
 def machine() -> dict[str, Any]:
     info: dict[str, Any] = {
         "python": platform.python_version(),
@@ -171,8 +198,7 @@ def main() -> int:
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_render-") as tmp:
         work = Path(tmp)
-        config = work / "config.yaml"
-        config.write_text(f"audio:\n  rate: {RATE}\nbank:\n  cache_dir: {work / 'banks'}\n")
+        config = write_config(work)
         # warm the bank cache (48 kHz default grid) so that every case loads it
         run_case(
             ["preset", "play", "brick", "--config", str(config), "--seconds", "0.1", "-o", str(work / "w.wav")],
@@ -182,11 +208,7 @@ def main() -> int:
         for seconds in lengths:
             for kind in kinds:
                 out = work / f"{kind}-{seconds:g}.wav"
-                result = run_case(case_args(kind, seconds, work, config, out), args.code, work)
-                result.update(kind=kind, seconds=seconds)
-                if out.exists():
-                    result["file_mb"] = round(out.stat().st_size / 2**20, 1)
-                    out.unlink()
+                result = measure(kind, seconds, case_args(kind, seconds, work, config, out), out, args.code, work)
                 rows.append(result)
                 status = f"ERROR {result['error']}" if result.get("code") else ""
                 print(
@@ -195,18 +217,15 @@ def main() -> int:
                     f"{status}",
                     flush=True,
                 )
-    data: dict[str, Any] = {}
-    if args.json.exists():
-        data = json.loads(args.json.read_text())
-    data.setdefault("runs", {})[args.label] = {
-        "machine": machine(),
-        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-        "settings": f"{RATE} Hz, 1 channel, float32 WAV, default bank (49 levels x 4 s) from a warm cache",
-        "code": str(args.code) if args.code else "working tree",
-        "cases": rows,
-    }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(data, indent=2) + "\n")
+    save_run(
+        args.json,
+        args.label,
+        {
+            "settings": f"{RATE} Hz, 1 channel, float32 WAV, default bank (49 levels x 4 s) from a warm cache",
+            "code": str(args.code) if args.code else "working tree",
+            "cases": rows,
+        },
+    )
     print(f"\n{'kind':8s} {'seconds':>8s} {'peak RSS MB':>12s} {'wall s':>8s} {'file MB':>8s}")
     for r in rows:
         rss = f"{r['peak_rss_mb']:.0f}" if "peak_rss_mb" in r else "-"
