@@ -34,7 +34,7 @@ from vibsynth.engine.commands import SetMute
 from vibsynth.engine.engine import Engine
 from vibsynth.engine.outputs import NullOutput, OutputBackend, SoundDeviceOutput, WavOutput
 from vibsynth.engine.supervisor import STREAMING, ExitGuard, hard_exit
-from vibsynth.engine.trims import ChannelActuator, apply_trims, derive_trims, mean_response
+from vibsynth.engine.trims import ChannelActuator, TrimContext, apply_trims, derive_trims, mean_response
 from vibsynth.errors import ConfigError, DeviceError, ParameterError, VibsynthError
 from vibsynth.settings.actuators import (
     config_intensity,
@@ -144,6 +144,7 @@ def build_engine(
         engine = Engine.from_settings(bank, settings.knobs, settings.audio)
     except ParameterError as exc:
         raise ConfigError(f"engine settings: {exc}") from None
+    engine.trim_context = TrimContext(basis, reference, intensity, settings.actuator.max_boost_db)
     if channels is not None:
         trims = derive_trims(bank, basis, reference, intensity, channels, max_gain_db=settings.actuator.max_boost_db)
         apply_trims(engine, trims)

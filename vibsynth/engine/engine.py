@@ -284,6 +284,8 @@ class Engine:
         self._voices: dict[int, tuple[NDArray[np.float32], int]] = {}
         # trim curves sent to the audio thread, by content (kept for the engine's lifetime)
         self._trim_curves: dict[bytes, NDArray[np.float32]] = {}
+        #: What the bank was built for (a :class:`~vibsynth.engine.trims.TrimContext`), set by whoever built it.
+        self.trim_context: object | None = None
 
     @classmethod
     def from_settings(cls, bank: NoiseBank, knobs: Knobs, audio: Audio) -> Engine:

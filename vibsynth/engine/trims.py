@@ -29,7 +29,7 @@ from vibsynth.engine.bank import NoiseBank, felt_spectra
 from vibsynth.engine.engine import Engine
 from vibsynth.errors import ConfigError, ParameterError
 
-__all__ = ["ChannelActuator", "mean_response", "derive_trims", "apply_trims"]
+__all__ = ["ChannelActuator", "TrimContext", "mean_response", "derive_trims", "apply_trims", "retrim_channel"]
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +50,27 @@ class ChannelActuator:
     name: str | None
     response: ActuatorResponse
     intensity: IntensityWeighting = PAPER_WEIGHTING
+
+
+@dataclass(frozen=True)
+class TrimContext:
+    """What a running engine's bank was built for: enough to trim a channel for another actuator later.
+
+    Attributes
+    ----------
+    basis : Basis
+    reference : ActuatorResponse
+        The response the bank was equalised for.
+    intensity : IntensityWeighting
+        The weighting it was normalised with.
+    max_gain_db : float
+        ``actuator.max_boost_db``.
+    """
+
+    basis: Basis
+    reference: ActuatorResponse
+    intensity: IntensityWeighting
+    max_gain_db: float
 
 
 def mean_response(responses: Sequence[ActuatorResponse]) -> ActuatorResponse:
@@ -136,6 +157,36 @@ def derive_trims(
         except ParameterError as exc:
             raise ConfigError(f"actuator profile {channel.name or '(actuator.profile)'}: {exc}") from None
     return trims
+
+
+def retrim_channel(engine: Engine, context: TrimContext, channel: int, actuator: ChannelActuator) -> ChannelTrim:
+    """Trim one channel of a running engine for ``actuator`` (glided in over 50 ms).
+
+    Parameters
+    ----------
+    engine : Engine
+    context : TrimContext
+        What the engine's bank was built for.
+    channel : int
+        0-based.
+    actuator : ChannelActuator
+
+    Raises
+    ------
+    ConfigError
+        A measured (absolute) response against a bank built for a relative one, or the reverse.
+    """
+    if actuator.response.absolute != context.reference.absolute:
+        kinds = ("relative", "measured (absolute)")
+        raise ConfigError(
+            f"profile {actuator.name} is {kinds[actuator.response.absolute]} but the engine's bank was built for a "
+            f"{kinds[context.reference.absolute]} response: their responses cannot be compared"
+        )
+    (trim,) = derive_trims(
+        engine.bank, context.basis, context.reference, context.intensity, [actuator], max_gain_db=context.max_gain_db
+    )
+    engine.set_trim(trim.gains(engine.bank.levels), trim.balance_offset, channels=[channel])
+    return trim
 
 
 def apply_trims(engine: Engine, trims: Sequence[ChannelTrim], *, glide_s: float = 0.0) -> None:

@@ -63,3 +63,67 @@ def test_bad_requests_are_refused_in_one_line(calibrate, path, body, message):
     status, data = post(server, path, body)
     assert status == 400 and message in data["message"] and "\n" not in data["message"]
     assert service.errors == 1
+
+
+# ---------------------------------------------------------------- apply to channel, hot
+def _user_profile(name, *, absolute=True, rate=16000, gain=0.0):
+    from vibsynth.settings.actuators import user_profile_dir
+
+    folder = user_profile_dir()
+    folder.mkdir(parents=True, exist_ok=True)
+    rate_line = f"rate: {rate}\n" if rate else ""
+    path = folder / f"{name}.yaml"
+    path.write_text(
+        f"name: {name}\nabsolute: {str(absolute).lower()}\n{rate_line}"
+        f"response: [[10, {gain - 25}], [60, {gain + 8}], [150, {gain}], [1000, {gain}]]\n"
+    )
+    return path
+
+
+@pytest.fixture
+def trimmed(tmp_path, monkeypatch, engine, controller, basis):
+    """A Calibrate service over an engine whose bank was built for a measured (absolute) flat response."""
+    from vibsynth.dsp.felt_intensity import PAPER_WEIGHTING
+    from vibsynth.engine.actuator import ActuatorResponse
+    from vibsynth.engine.trims import TrimContext
+    from vibsynth.settings.config import load_config
+
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "cfg"))
+    reference = ActuatorResponse.from_points([(10, 0), (1000, 0)], absolute=True)
+    engine.trim_context = TrimContext(basis, reference, PAPER_WEIGHTING, 40.0)
+    overrides = {"lab.folder": str(tmp_path / "sessions"), "audio.rate": 16000, "audio.channels": 2}
+    config = load_config(None, overrides=overrides, user_file=False)
+    service = CalibrateService(config.settings, controller.channels, engine)
+    ext = StudioExtension(name="calibrate", title="Calibrate", script=SCRIPT, add_routes=service.add_routes)
+    server = StudioServer(controller, port=0, extensions=[ext])
+    server.start()
+    yield server, service, engine
+    server.stop()
+
+
+def test_applying_a_profile_to_a_channel_trims_it_now(trimmed):
+    _, service, engine = trimmed
+    _user_profile("coil-b", gain=-6.0)
+    done = service._retrim(2, "coil-b")
+    engine.render(2048)  # past the 50 ms glide
+    assert done["applied"] is True and done["config"] == "actuator.channel_profiles: [null, coil-b]"
+    (off1, gain1), (off2, gain2) = engine.trim_values()
+    assert (off1, gain1) == (0.0, 1.0)  # the other channel is untouched
+    assert off2 < -0.05 and gain2 > 1.2  # low end 25 dB down (felt brighter), 6 dB less sensitive
+    assert "gain +" in done["trim"]
+
+
+@pytest.mark.parametrize(
+    ("kw", "message"),
+    [
+        ({"absolute": False, "rate": None}, "coil-c is relative but the engine's bank was built for a measured"),
+        ({"rate": 44100}, "was measured at 44100 Hz but audio.rate is 16000 Hz"),
+    ],
+)
+def test_a_profile_the_engine_cannot_trim_for_is_refused_before_anything_is_written(trimmed, kw, message):
+    server, service, engine = trimmed
+    path = _user_profile("coil-c", **kw)
+    before = path.read_bytes()
+    status, data = post(server, "apply", {"profile": "coil-c", "channel": 1, "sessions": []})
+    assert status == 400 and message in data["message"] and "\n" not in data["message"]
+    assert path.read_bytes() == before and engine.trim_values()[0] == (0.0, 1.0) and service.errors == 1

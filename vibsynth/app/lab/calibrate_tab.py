@@ -7,7 +7,10 @@ Routes (JSON; behind the studio's token, Origin, Host and body-size checks):
                                (``sessions``: lab folders on sines, may be empty), the band it derives and the
                                band of the model curve
 ``POST /ext/calibrate/apply``  ``{channel, profile, sessions}``: write the derived weighting and band into the
-                               (user) profile (:func:`vibsynth.app.calibrate.apply_iso_curve`)
+                               (user) profile (:func:`vibsynth.app.calibrate.apply_iso_curve`) and, hot, give
+                               the channel that profile: its trim (:mod:`vibsynth.engine.trims`) is derived
+                               against the running bank and glided in; the answer says what the config needs
+                               to keep it (``actuator.channel_profiles``), which is not written
 
 Errors answer 400 with ``{"message": ...}`` (one line), are counted, and change nothing.
 """
@@ -39,13 +42,16 @@ class CalibrateService:
     settings : VibsynthConfig
     channels : int
         The engine's channels.
+    engine : Engine, optional
+        The running engine, to trim a channel for the profile applied to it (None: only the file is written).
     """
 
-    def __init__(self, settings: VibsynthConfig, channels: int) -> None:
+    def __init__(self, settings: VibsynthConfig, channels: int, engine: Any = None) -> None:
         from vibsynth.research.lab.session import sessions_root
 
         self.settings = settings
         self.channels = channels
+        self.engine = engine
         self.root = sessions_root(settings.lab)
         self.errors = 0
 
@@ -138,6 +144,7 @@ class CalibrateService:
                 f"{profile['name']} is a shipped profile: measure your actuator (vibsynth calibrate response) "
                 "and apply the curve to that profile"
             )
+        self._check_fits(profile)
         curve = self._curve(body, [list(map(float, p)) for p in profile["response"]])
         if curve is None:
             raise ParameterError("choose the iso-intensity sessions whose curve to apply")
@@ -145,7 +152,46 @@ class CalibrateService:
         written = apply_iso_curve(
             path, curve.freqs_hz, curve.acceleration_db, source=f"lab iso-intensity curve ({who}), channel {channel}"
         )
-        return {"profile": profile["name"], "channel": channel, "band_hz": written["band_hz"], "file": str(path)}
+        out = {"profile": profile["name"], "channel": channel, "band_hz": written["band_hz"], "file": str(path)}
+        return out | self._retrim(channel, profile["name"])
+
+    def _check_fits(self, profile: dict[str, Any]) -> None:
+        """Refuse (before writing anything) a profile the running engine cannot trim a channel for."""
+        from vibsynth.engine.trims import TrimContext
+        from vibsynth.settings.actuators import profile_rate_problem
+
+        problem = profile_rate_problem(profile, self.settings.audio.rate)
+        if problem is not None:
+            raise InputError(problem)
+        context = getattr(self.engine, "trim_context", None)
+        if isinstance(context, TrimContext) and bool(profile.get("absolute")) != context.reference.absolute:
+            kinds = ("relative", "measured (absolute)")
+            raise InputError(
+                f"{profile['name']} is {kinds[bool(profile.get('absolute'))]} but the engine's bank was built for a "
+                f"{kinds[context.reference.absolute]} response: their responses cannot be compared"
+            )
+
+    def _retrim(self, channel: int, name: str) -> dict[str, Any]:
+        """Give the running engine's channel this profile now: its trim, and what the config needs to keep it."""
+        from vibsynth.engine.actuator import ActuatorResponse
+        from vibsynth.engine.trims import ChannelActuator, TrimContext, retrim_channel
+        from vibsynth.settings.actuators import load_actuator_profile, profile_intensity
+        from vibsynth.settings.layouts import channel_profile_names
+
+        names: list[str | None] = list(channel_profile_names(self.settings))
+        names[channel - 1] = name
+        keep = "actuator.channel_profiles: [" + ", ".join(n or "null" for n in names) + "]"
+        context = getattr(self.engine, "trim_context", None)
+        if not isinstance(context, TrimContext):
+            return {"applied": False, "config": keep}
+        profile = load_actuator_profile(name)
+        response = ActuatorResponse.from_points(
+            profile["response"], max_boost_db=context.max_gain_db, absolute=bool(profile["absolute"])
+        )
+        trim = retrim_channel(
+            self.engine, context, channel - 1, ChannelActuator(name, response, profile_intensity(name))
+        )
+        return {"applied": True, "trim": trim.describe(), "config": keep}
 
     # ------------------------------------------------------------------ HTTP
     def add_routes(self, app: Any, host: StudioHost) -> None:
@@ -169,5 +215,5 @@ class CalibrateService:
 
 def studio_extension(settings: VibsynthConfig, controller: Any, library: Any) -> StudioExtension | None:
     """The Calibrate tab (``vibsynth/app/studio_tabs.py`` lists this module)."""
-    service = CalibrateService(settings, int(controller.channels))
+    service = CalibrateService(settings, int(controller.channels), getattr(controller, "engine", None))
     return StudioExtension(name="calibrate", title="Calibrate", script=SCRIPT, add_routes=service.add_routes)
