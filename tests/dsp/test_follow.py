@@ -187,3 +187,18 @@ def test_bad_tracker_arguments(basis, kwargs, match):
 def test_bad_params(field, value):
     with pytest.raises(ParameterError, match=field.split("_")[0]):
         TrackerParams(**{field: value})
+
+
+def test_follow_and_follow_channels_share_one_set_of_options_and_refuse_others(basis):
+    rng = np.random.default_rng(11)
+    x = 0.01 * rng.standard_normal((24000, 2))
+    options = {"mode": "audio", "focus": "effects", "basis": basis, "ceiling_db": -34.0, "range_db": 30.0}
+    mixed = follow(x.mean(axis=1), 48000.0, **options)
+    assert np.array_equal(follow(x, 48000.0, **options).intensity, mixed.intensity)
+    left, right = follow_channels(x, 48000.0, **options)
+    assert np.array_equal(left.intensity, follow(x[:, 0], 48000.0, **options).intensity)
+    assert (mixed.mode, mixed.focus) == ("audio", "effects")
+    with pytest.raises(TypeError, match="unexpected keyword argument 'ceiling'"):
+        follow(x, 48000.0, basis=basis, ceiling=-30.0)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'foucs'"):
+        follow_channels(x, 48000.0, basis=basis, foucs="bass")

@@ -16,7 +16,10 @@ captured samples and events on the same JACK frame clock (for latency).
 
 from __future__ import annotations
 
+import bisect
 import os
+import re
+import subprocess
 import threading
 from collections.abc import Sequence
 
@@ -32,6 +35,8 @@ __all__ = [
     "JackPlayer",
     "portaudio_output_ports",
     "portaudio_input_ports",
+    "jack_ports",
+    "new_ports",
     "counter_value",
     "counter_frames",
     "capture",
@@ -139,6 +144,7 @@ class JackCapture:
         self.start_frame: int | None = None
         self.gaps = 0
         self._next_frame: int | None = None
+        self._blocks: list[tuple[int, int]] = []  # (data index, JACK frame) of each captured block
         self._armed = False
         self._done = threading.Event()
         self.client.set_process_callback(self._process)
@@ -155,6 +161,7 @@ class JackCapture:
         elif now != self._next_frame:
             self.gaps += 1
         self._next_frame = now + frames
+        self._blocks.append((pos, now))
         for k, port in enumerate(self.inports):
             self.data[pos : pos + n, k] = port.get_array()[:n]
         self.frames_captured = pos + n
@@ -176,10 +183,32 @@ class JackCapture:
         self.start_frame = None
         self.gaps = 0
         self._next_frame = None
+        self._blocks = []
 
     def arm(self) -> None:
         """Start recording at the next JACK cycle."""
         self._armed = True
+
+    def index_of(self, frame: int) -> int:
+        """Index in :attr:`data` of the sample of JACK frame ``frame``; gap-aware.
+
+        Where cycles were missed (:attr:`gaps`) the data joins what is around them, so
+        ``frame - start_frame`` would point past the sample; a frame in a missed cycle maps
+        to the first sample captured after it.
+        """
+        blocks = self._blocks
+        k = bisect.bisect_right([f for _, f in blocks], frame) - 1
+        if k < 0:
+            return 0
+        pos, start = blocks[k]
+        end = blocks[k + 1][0] if k + 1 < len(blocks) else self.frames_captured
+        return min(pos + (frame - start), end)
+
+    def frame_of(self, index: int) -> int:
+        """The JACK frame of :attr:`data`'s sample ``index`` (the inverse of :meth:`index_of`)."""
+        k = bisect.bisect_right([p for p, _ in self._blocks], index) - 1
+        pos, start = self._blocks[max(k, 0)]
+        return start + (index - pos)
 
     def frame_time_now(self) -> int:
         """The JACK frame clock now (same clock as :attr:`start_frame`)."""
@@ -224,6 +253,22 @@ def portaudio_input_ports(client, pattern: str = "PortAudio") -> list[str]:
     """Names of the audio input ports of PortAudio clients (e.g. ``PortAudio:in_0``), in port order."""
     ports = client.get_ports(name_pattern=pattern, is_audio=True, is_input=True)
     return sorted((p.name for p in ports), key=lambda name: (len(name), name))
+
+
+def jack_ports() -> set[str]:
+    """Every port of the JACK server now (``jack_lsp``: no JACK client in the test process)."""
+    return set(subprocess.run(["jack_lsp"], capture_output=True, text=True, check=True).stdout.split())
+
+
+def new_ports(before: set[str], kind: str = "in") -> list[str]:
+    """PortAudio's ``in`` (or ``out``) ports that appeared since ``before``, in port order.
+
+    Any PortAudio client counts (``PortAudio[^:]*``): a process that initialised PortAudio on JACK
+    holds the client name ``PortAudio`` for as long as it lives (the test process itself, after an
+    in-process output test), so a serve started later is ``PortAudio-01``.
+    """
+    fresh = [p for p in jack_ports() - before if re.fullmatch(rf"PortAudio[^:]*:{kind}_\d+", p)]
+    return sorted(fresh, key=lambda name: (len(name), name))
 
 
 #: Period of :func:`counter_value`: frames that the counter signal encodes before it wraps.

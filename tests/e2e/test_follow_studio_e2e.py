@@ -24,14 +24,13 @@ Run: ``scripts/with_jack.sh -- .venv/bin/python -m pytest tests/e2e/test_follow_
 from __future__ import annotations
 
 import os
-import re
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.e2e.jackutil import JackPlayer, require_jack
+from tests.e2e.jackutil import JackPlayer, jack_ports, new_ports, require_jack
 from tests.e2e.studioutil import (
     by_testid,
     chromium,
@@ -41,7 +40,6 @@ from tests.e2e.studioutil import (
     start_serve,
     wait_for,
 )
-from tests.e2e.test_input_jack_e2e import jack_ports
 
 pytestmark = pytest.mark.e2e
 
@@ -49,13 +47,6 @@ FS = 48000
 QUIET_DB, LOUD_DB = -70.0, -50.0  # band levels: knob 0.25 and 0.75 (knobs.ceiling_db -40, range_db 40)
 QUIET_S, LOUD_S = 6.0, 60.0
 CONFIG = "follow:\n  enabled: true\n  device: 'system:1,2'\n  mode: vibration\nknobs:\n  glide_ms: 0\n"
-
-
-def new_ports(before: set[str]) -> list[str]:
-    """PortAudio input ports that appeared since ``before``, in port order (the JACK client of a second serve
-    running at once is ``PortAudio-01``)."""
-    fresh = [p for p in jack_ports() - before if re.fullmatch(r"PortAudio[^:]*:in_\d+", p)]
-    return sorted(fresh, key=lambda name: (len(name), name))
 
 
 def knob_of(level_db: float) -> float:

@@ -18,7 +18,6 @@ from __future__ import annotations
 import json
 import os
 import queue
-import re
 import subprocess
 import sys
 import threading
@@ -32,6 +31,8 @@ from tests.e2e.jackutil import (
     COUNTER_PERIOD,
     JackPlayer,
     counter_frames,
+    jack_ports,
+    new_ports,
     portaudio_input_ports,
     portaudio_output_ports,
 )
@@ -54,22 +55,6 @@ SLACK = 3
 WINDOW_S = float(os.environ.get("VIBSYNTH_INPUT_WINDOW_S", "2.5"))
 #: Windows of each kind (alone, with the input), alternated.
 ROUNDS = 4
-
-
-def new_ports(before: set[str]) -> list[str]:
-    """PortAudio's input ports that appeared since ``before`` (PortAudio numbers them on, stream after stream).
-
-    Any PortAudio client counts: a process that initialised PortAudio on JACK holds the client
-    name ``PortAudio`` for as long as it lives (the test process itself, after an in-process
-    output test), and the next one is ``PortAudio-01``.
-    """
-    ports = subprocess.run(["jack_lsp"], capture_output=True, text=True, check=True).stdout.split()
-    fresh = [p for p in ports if re.fullmatch(r"PortAudio[^:]*:in_\d+", p) and p not in before]
-    return sorted(fresh, key=lambda name: (len(name), name))
-
-
-def jack_ports() -> set[str]:
-    return set(subprocess.run(["jack_lsp"], capture_output=True, text=True, check=True).stdout.split())
 
 
 def exact_but_for_xruns(bad: int, checked: int, disturbances: int, channels: int) -> bool:

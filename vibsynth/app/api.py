@@ -13,6 +13,7 @@ import math
 import numbers
 import os
 import secrets
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -23,14 +24,18 @@ from vibsynth.dsp.analysis import Analysis
 from vibsynth.dsp.analysis import analyze as _analyze
 from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
-from vibsynth.dsp.follow import Focus, FollowResult, Mode, TrackerParams
+from vibsynth.dsp.follow import FollowResult
 from vibsynth.dsp.follow import follow as _follow
+from vibsynth.dsp.follow.offline import FollowOptions
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB
 from vibsynth.engine.bank import BankSpec, build_bank
 from vibsynth.engine.engine import Engine
 from vibsynth.errors import ParameterError
 from vibsynth.formats.basis_file import default_basis
 from vibsynth.formats.recordings import read_recording
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack  # typing.Unpack from Python 3.11
 
 __all__ = ["analyze", "render", "follow", "RENDER_LOOP_SECONDS"]
 
@@ -185,36 +190,20 @@ def render(
     return out
 
 
-def follow(
-    x: ArrayLike,
-    fs: float,
-    *,
-    mode: Mode = "vibration",
-    focus: Focus = "all",
-    params: TrackerParams | None = None,
-    basis: Basis | None = None,
-    ceiling_db: float = DEFAULT_CEILING_DB,
-    range_db: float = DEFAULT_RANGE_DB,
-) -> FollowResult:
+def follow(x: ArrayLike, fs: float, **options: Unpack[FollowOptions]) -> FollowResult:
     """Knob trajectories (intensity, balance, transients) that follow a sound or a vibration.
 
     :func:`vibsynth.dsp.follow.follow` (the one tracker over the whole signal, latency
     compensated; docs/follow.md) with the shipped basis unless ``basis`` is given. ``x`` has
-    shape (n,) or (n, channels) (mixed to their mean); ``params`` overrides ``mode`` and ``focus``;
-    ``ceiling_db`` / ``range_db`` are the engine's intensity mapping.
+    shape (n,) or (n, channels) (mixed to their mean); the options are
+    :class:`~vibsynth.dsp.follow.offline.FollowOptions` (``mode``, ``focus``, ``params`` overriding
+    both, ``basis``, the engine's intensity mapping ``ceiling_db`` / ``range_db``, ``balance_limits``).
 
     Returns
     -------
     result : FollowResult
         ``times``, ``intensity``, ``balance``, ``level_db``, ``onsets`` and notes on bad input.
     """
-    return _follow(
-        x,
-        fs,
-        mode=mode,
-        focus=focus,
-        params=params,
-        basis=basis if basis is not None else default_basis(),
-        ceiling_db=ceiling_db,
-        range_db=range_db,
-    )
+    if options.get("basis") is None:
+        options["basis"] = default_basis()
+    return _follow(x, fs, **options)

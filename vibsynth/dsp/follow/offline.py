@@ -12,6 +12,7 @@ tracker's latency, so a step at time t shows at time t.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -24,7 +25,11 @@ from vibsynth.dsp.follow.vibration import VibrationAnalyzer
 from vibsynth.dsp.intensity import DEFAULT_CEILING_DB, DEFAULT_RANGE_DB
 from vibsynth.errors import ParameterError
 
+if TYPE_CHECKING:
+    from typing_extensions import Unpack  # typing.Unpack from Python 3.11
+
 __all__ = [
+    "FollowOptions",
     "FollowResult",
     "follow",
     "follow_channels",
@@ -261,18 +266,35 @@ def _result(frames: TrackFrames, tracker: Tracker, n: int) -> FollowResult:
     )
 
 
-def follow(
-    x: ArrayLike,
-    fs: float,
-    *,
-    mode: Mode = "vibration",
-    focus: Focus = "all",
-    params: TrackerParams | None = None,
-    basis: Basis | None = None,
-    ceiling_db: float = DEFAULT_CEILING_DB,
-    range_db: float = DEFAULT_RANGE_DB,
-    balance_limits: tuple[float, float] = BALANCE_LIMITS,
-) -> FollowResult:
+class FollowOptions(TypedDict, total=False):
+    """The keyword options of :func:`follow`, :func:`follow_channels` and :func:`vibsynth.follow` (one declaration).
+
+    Attributes
+    ----------
+    mode : {"vibration", "audio"}
+        Default ``vibration``.
+    focus : {"all", "effects", "bass", "beat"}
+        Audio mode only; default ``all``.
+    params : TrackerParams or None
+        Overrides ``mode`` and ``focus`` (default: :func:`default_params` of them).
+    basis : Basis or None
+        Required here in ``dsp``; :func:`vibsynth.follow` loads the packaged one.
+    ceiling_db, range_db : float
+        The engine's intensity mapping (default -40 and 40 dB).
+    balance_limits : tuple of float
+        The live balance range (default -3.5, 3.5).
+    """
+
+    mode: Mode
+    focus: Focus
+    params: TrackerParams | None
+    basis: Basis | None
+    ceiling_db: float
+    range_db: float
+    balance_limits: tuple[float, float]
+
+
+def follow(x: ArrayLike, fs: float, **options: Unpack[FollowOptions]) -> FollowResult:
     """Knob trajectories of a whole signal (offline, latency compensated).
 
     Parameters
@@ -281,16 +303,9 @@ def follow(
         Samples; several channels are mixed to their mean (:func:`follow_channels` follows each).
     fs : float
         Sample rate (Hz); the tracker decimates to its internal rate.
-    mode : {"vibration", "audio"}
-    focus : {"all", "effects", "bass", "beat"}
-        Audio mode only.
-    params : TrackerParams, optional
-        Overrides ``mode`` and ``focus`` (default: :func:`default_params` of them).
-    basis : Basis, optional
-        Default: the packaged basis (loaded by the caller's layer; required here in ``dsp``).
-    ceiling_db, range_db : float
-        The engine's intensity mapping.
-    balance_limits : tuple of float
+    **options
+        :class:`FollowOptions`: ``mode``, ``focus``, ``params``, ``basis``, ``ceiling_db``,
+        ``range_db``, ``balance_limits``.
 
     Returns
     -------
@@ -300,48 +315,35 @@ def follow(
     ------
     ParameterError
         No basis, a bad shape or rate, an unknown mode or focus, or input shorter than one frame.
+    TypeError
+        An option that is not one of :class:`FollowOptions`.
     """
-    return _follow(x, fs, mode, focus, params, basis, ceiling_db, range_db, balance_limits, each_channel=False)[0]
+    return _follow(x, fs, options, each_channel=False)[0]
 
 
-def follow_channels(
-    x: ArrayLike,
-    fs: float,
-    *,
-    mode: Mode = "vibration",
-    focus: Focus = "all",
-    params: TrackerParams | None = None,
-    basis: Basis | None = None,
-    ceiling_db: float = DEFAULT_CEILING_DB,
-    range_db: float = DEFAULT_RANGE_DB,
-    balance_limits: tuple[float, float] = BALANCE_LIMITS,
-) -> list[FollowResult]:
-    """:func:`follow` each input channel on its own (stereo -> two actuators).
+def follow_channels(x: ArrayLike, fs: float, **options: Unpack[FollowOptions]) -> list[FollowResult]:
+    """:func:`follow` each input channel on its own (stereo -> two actuators); the same options.
 
     Returns
     -------
     results : list of FollowResult
         One per column of ``x``.
     """
-    return _follow(x, fs, mode, focus, params, basis, ceiling_db, range_db, balance_limits, each_channel=True)
+    return _follow(x, fs, options, each_channel=True)
 
 
-def _follow(
-    x: ArrayLike,
-    fs: float,
-    mode: Mode,
-    focus: Focus,
-    params: TrackerParams | None,
-    basis: Basis | None,
-    ceiling_db: float,
-    range_db: float,
-    balance_limits: tuple[float, float],
-    *,
-    each_channel: bool,
-) -> list[FollowResult]:
+def _follow(x: ArrayLike, fs: float, options: FollowOptions, *, each_channel: bool) -> list[FollowResult]:
+    unknown = sorted(set(options) - set(FollowOptions.__annotations__))
+    if unknown:
+        raise TypeError(f"follow() got an unexpected keyword argument {unknown[0]!r}")
+    basis = options.get("basis")
     if basis is None:
         raise ParameterError("follow needs a basis (vibsynth.follow loads the packaged one)")
-    p = params if params is not None else default_params(mode, focus)
+    params = options.get("params")
+    p = params if params is not None else default_params(options.get("mode", "vibration"), options.get("focus", "all"))
+    ceiling_db = options.get("ceiling_db", DEFAULT_CEILING_DB)
+    range_db = options.get("range_db", DEFAULT_RANGE_DB)
+    balance_limits = options.get("balance_limits", BALANCE_LIMITS)
     arr = _as_channels(x)
     probe = Tracker(
         fs=fs, params=p, basis=basis, ceiling_db=ceiling_db, range_db=range_db, balance_limits=balance_limits
