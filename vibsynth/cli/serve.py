@@ -100,9 +100,10 @@ def _add_follow_arguments(p: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--follow",
         type=flag_type("follow.device"),
-        metavar="DEVICE[:CH,...]|FILE.wav",
+        metavar="DEVICE[:CH,...]|monitor|FILE.wav",
         help="follow this input live: a device (name substring or index, then 1-based inputs; on JACK, "
-        "serve's own in_N ports) or a WAV file played in step with the output (default: follow.device "
+        "serve's own in_N ports), 'monitor' (what the system plays: JACK playback feeds, a PulseAudio/PipeWire "
+        "monitor, a WASAPI loopback) or a WAV file played in step with the output (default: follow.device "
         "when follow.enabled)",
     )
     group.add_argument(

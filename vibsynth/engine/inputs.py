@@ -13,6 +13,8 @@ the control layer reads any of them the same way:
   by block, never loaded whole) fed into a ring by a Python thread, paced by the *output*
   clock (the engine's frame position), looping or ending.
 
+* :class:`~vibsynth.engine.monitor.MonitorInput`: what the system plays (``--follow monitor``).
+
 :func:`open_input` picks one from a ``--follow`` argument.
 """
 
@@ -525,11 +527,17 @@ def open_input(
     loop: bool = False,
     **device_options: Any,
 ) -> InputSource:
-    """A :class:`FileInput` when ``spec`` names a ``.wav`` file, else a :class:`SoundDeviceInput` (not opened).
+    """A :class:`FileInput` when ``spec`` names a ``.wav`` file, a
+    :class:`~vibsynth.engine.monitor.MonitorInput` for ``monitor`` (what the system plays), else a
+    :class:`SoundDeviceInput` (not opened).
 
     ``device_options`` go to :class:`SoundDeviceInput` (``host_api``, ``block_size``, ...).
     """
     text = str(spec)
     if text.lower().endswith((".wav", ".wave")) or Path(text).is_file():
         return FileInput(text, fs=fs, frame_clock=frame_clock, loop=loop)
+    from vibsynth.engine.monitor import MonitorInput, is_monitor_spec  # it builds on this module
+
+    if is_monitor_spec(text):
+        return MonitorInput(fs=fs, **device_options)
     return SoundDeviceInput(text, fs=fs, **device_options)

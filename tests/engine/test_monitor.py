@@ -1,0 +1,125 @@
+"""``--follow monitor``: the paths tried, the message when none exists, and the JACK patch-bay logic on a fake graph."""
+
+from __future__ import annotations
+
+import sys
+from types import SimpleNamespace
+
+import pytest
+
+from vibsynth.engine import monitor
+from vibsynth.engine.inputs import open_input
+from vibsynth.engine.monitor import JackPatcher, MonitorInput, import_jack, is_monitor_spec
+from vibsynth.errors import DeviceError
+
+
+class FakeSoundDevice:
+    def __init__(self, apis, devices):
+        self._apis, self._devices = apis, devices
+
+    def query_hostapis(self):
+        return self._apis
+
+    def query_devices(self):
+        return self._devices
+
+
+def test_monitor_is_the_word_and_open_input_makes_a_monitor_input():
+    assert is_monitor_spec("monitor") and is_monitor_spec(" Monitor ") and not is_monitor_spec("monitor:1")
+    source = open_input("monitor", fs=48000.0, frame_clock=lambda: 0, host_api="JACK", block_size=128)
+    assert isinstance(source, MonitorInput) and source.fs == 48000.0
+    with pytest.raises(DeviceError, match="not open yet"):
+        source.ring  # noqa: B018
+
+
+def test_no_monitor_anywhere_is_one_message_naming_what_was_tried(monkeypatch):
+    sd = FakeSoundDevice([{"name": "ALSA"}], [{"name": "hw:0,0", "hostapi": 0, "max_input_channels": 2}])
+    monkeypatch.setattr(monitor, "import_sounddevice", lambda: sd)
+    with pytest.raises(DeviceError) as info:
+        MonitorInput(fs=48000.0).open()
+    message = str(info.value)
+    assert message.startswith("no loopback/monitor input on this system; tried JACK: PortAudio has no JACK host API")
+    assert "PulseAudio/PipeWire: PortAudio lists no 'pulse' or 'pipewire' input device" in message
+    assert "WASAPI loopback: PortAudio lists no WASAPI [Loopback] input device" in message
+
+
+def test_without_the_jack_package_the_message_says_how_to_get_it(monkeypatch):
+    monkeypatch.setitem(sys.modules, "jack", None)
+    with pytest.raises(DeviceError, match=r"needs the JACK-Client package .*pip install 'vibsynth\[monitor\]'"):
+        import_jack()
+
+
+class FakePort(SimpleNamespace):
+    pass
+
+
+class FakeClient:
+    """A JACK graph: port names -> kind, and a set of (source, destination) connections."""
+
+    def __init__(self, graph):
+        self.graph = graph
+
+    def get_ports(self, is_audio=True, is_input=False, is_physical=False):
+        names = self.graph.inputs if is_input else self.graph.outputs
+        return [FakePort(name=n) for n in names if not is_physical or n.startswith("system:")]
+
+    def get_port_by_name(self, name):
+        return FakePort(name=name)
+
+    def get_all_connections(self, port):
+        return [FakePort(name=a if b == port.name else b) for a, b in self.graph.links if port.name in (a, b)]
+
+    def connect(self, a, b):
+        self.graph.links.add((a, b))
+
+    def disconnect(self, a, b):
+        self.graph.links.discard((a, b))
+
+    def close(self):
+        pass
+
+
+def test_the_patcher_connects_what_feeds_the_playback_ports_to_our_new_ports_and_not_our_outputs(monkeypatch):
+    graph = SimpleNamespace(
+        inputs=["system:playback_1", "system:playback_2", "PortAudio:in_0", "PortAudio:in_1"],  # another app's
+        outputs=["system:capture_1", "PortAudio-01:out_0", "game:L", "game:R"],
+        links={
+            ("PortAudio-01:out_0", "system:playback_1"),
+            ("game:L", "system:playback_1"),
+            ("game:R", "system:playback_2"),
+        },
+    )
+    fake_jack = SimpleNamespace(Client=lambda name, no_start_server: FakeClient(graph))
+    monkeypatch.setattr(monitor, "import_jack", lambda: fake_jack)
+    patcher = JackPatcher(2)
+    patcher.snapshot()  # before our stream opens: PortAudio:in_* belong to someone else
+    graph.inputs += ["PortAudio-01:in_0", "PortAudio-01:in_1"]
+    graph.links.add(("system:capture_1", "PortAudio-01:in_0"))  # PortAudio's own auto-connection
+    patcher.poll()
+    assert patcher.own == ["PortAudio-01:in_0", "PortAudio-01:in_1"]
+    assert ("game:L", "PortAudio-01:in_0") in graph.links and ("game:R", "PortAudio-01:in_1") in graph.links
+    assert ("PortAudio-01:out_0", "PortAudio-01:in_0") not in graph.links  # our own output is not followed
+    assert ("system:capture_1", "PortAudio-01:in_0") not in graph.links
+    assert not any(b.startswith("PortAudio:") for _, b in graph.links)  # the other app's ports untouched
+    assert patcher.sources == ["game:L", "game:R"] and patcher.connections == 2
+    # a new program starts playing: followed at the next poll; one that stops is let go
+    graph.outputs.append("video:out")
+    graph.links.add(("video:out", "system:playback_2"))
+    graph.links.discard(("game:L", "system:playback_1"))
+    patcher.poll()
+    assert ("video:out", "PortAudio-01:in_1") in graph.links and ("game:L", "PortAudio-01:in_0") not in graph.links
+    assert patcher.sources == ["game:R", "video:out"]
+
+
+def test_a_server_that_goes_away_is_counted_and_patched_again_when_it_is_back(monkeypatch):
+    calls = {"n": 0}
+
+    def client(name, no_start_server):
+        calls["n"] += 1
+        raise RuntimeError("Error initializing client")
+
+    monkeypatch.setattr(monitor, "import_jack", lambda: SimpleNamespace(Client=client))
+    patcher = JackPatcher(2)
+    patcher.poll()
+    patcher.poll()
+    assert patcher.errors == 2 and calls["n"] == 2 and "Error initializing client" in patcher.reason
