@@ -102,7 +102,8 @@ def channel_status(controller: Any) -> Pairs:
 def follow_status(controller: Any, fit: Callable[[str, int], str] = lambda text, size: text[:size]) -> Pairs:
     """``follow.device`` (the input and its state), ``follow.level_db`` (tracked input level, the
     gate's units), ``follow.gate`` (1 = open), ``follow.gain``/``follow.gate_db`` (dB),
-    ``follow.focus``, ``follow.stale_frames`` and ``ch{n}.follow`` (1 = follows); none when follow is off."""
+    ``follow.focus``, ``follow.stale_frames``, ``follow.losses``/``follow.recoveries`` (inputs lost and
+    back) and ``ch{n}.follow`` (1 = follows); none when follow is off."""
     follower = follower_of(controller)
     if follower is None:
         return []
@@ -114,5 +115,7 @@ def follow_status(controller: Any, fit: Callable[[str, int], str] = lambda text,
         ("follow.gate_db", float(follower.gate_db)),
         ("follow.focus", str(follower.focus)),
         ("follow.stale_frames", int(follower.stale_frames)),
+        ("follow.losses", int(follower.losses)),
+        ("follow.recoveries", int(follower.recoveries)),
     ]
     return pairs + [(f"ch{c + 1}.follow", int(follower.is_on(c))) for c in follower.channels()]

@@ -146,6 +146,24 @@ def test_a_lost_input_fades_out_then_follow_recovers_when_frames_return(make_rig
     assert rig.plays(0)[0] == pytest.approx(knob_of(-56), abs=0.02)
 
 
+def test_stray_blocks_while_the_input_says_it_is_lost_are_no_recovery(make_rig):
+    """PortAudio on a dead JACK server still delivers a block now and then while serve's output retries:
+    measured in tests/e2e/test_follow_loss_e2e.py, it made follow flap lost/back 22 times in one outage."""
+    rig = make_rig(follow={"on_loss": "fade", "fade_s": 0.0})
+    rig.feed(tone(FS, 0.4, 10 ** (-50 / 20)))
+    rig.source.state, rig.source.reason = "retrying", "JACK server shut down"
+    rig.idle(0.1)
+    assert rig.follower.lost and rig.follower.losses == 1
+    for k in range(5):  # a stray block every 100 ms, the state still "retrying"
+        rig.feed(tone(FS, 128 / FS, 10 ** (-50 / 20), start=k * 128))
+        rig.idle(0.1)
+    assert rig.follower.lost and rig.follower.recoveries == 0 and rig.follower.losses == 1
+    assert rig.follower.stray_frames == 5 * 128 and rig.plays(0)[0] == 0.0
+    rig.source.state = "open"
+    rig.feed(tone(FS, 0.4, 10 ** (-56 / 20)))
+    assert not rig.follower.lost and rig.follower.recoveries == 1
+
+
 def test_a_lost_input_holds_the_last_texture_when_asked(make_rig):
     rig = make_rig(follow={"on_loss": "hold"})
     rig.feed(tone(FS, 0.4, 10 ** (-50 / 20)))

@@ -178,6 +178,8 @@ class Follower:
         #: Input frames dropped because the worker fell behind, and how often it did.
         self.stale_frames = 0
         self.stale_drops = 0
+        #: Frames that arrived while the input said it was lost (not a recovery: dropped).
+        self.stray_frames = 0
         self.losses = 0
         self.recoveries = 0
         self.steps = 0
@@ -263,6 +265,11 @@ class Follower:
             self.stale_drops += 1
         block = ring.read(max(1, int(self.max_block_s * fs)))
         state = self._input_state(now)
+        if block.shape[0] and self.lost and state in LOST_STATES:
+            # A stream being torn down may still deliver a stray block (PortAudio on a dead JACK
+            # server does, while the output retries): it is no recovery; dropped and counted.
+            self.stray_frames += block.shape[0]
+            return False
         if block.shape[0]:
             self._last_data = now
             self._had_data = True

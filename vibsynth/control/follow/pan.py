@@ -2,9 +2,10 @@
 
 Each input's level is measured as the route's tracker measures the mix (vibration mode: the
 paper's 80-200 Hz band; audio mode: BS.1770's K-weighting), over the tracker's balance window
-(``balance_ms``, 100 ms: a level difference is a balance, and 100 ms of 80-200 Hz noise holds
-about 24 degrees of freedom, so a centred noise jitters by about 1.3 dB, 5 % of the default
-24 dB span). The level difference ``d = L - R`` (dB) puts the source at
+(``balance_ms``, 100 ms: a level difference is a balance; 100 ms of 80-200 Hz noise holds about
+24 degrees of freedom, so two uncorrelated noises of one level differ by 1.5 dB rms, 6 % of the
+default 24 dB span; K-weighted program audio by 0.1-0.2 dB). The level difference ``d = L - R``
+(dB) puts the source at
 
 ``u = 0.5 - d / (2 range_db)``, clipped to [0, 1], ``position = left + u (right - left)``:
 
