@@ -110,7 +110,7 @@ class ChannelTrim:
         text = f"gain {self.gain_db:+.1f} dB"
         if self.gain_spread_db >= 0.05:
             text += f" (spread {self.gain_spread_db:.1f} dB over balance -1..+1)"
-        text += f", balance {self.balance_offset:+.3f}"
+        text += f", balance {round(self.balance_offset, 3) + 0.0:+.3f}"  # + 0.0: no "-0.000"
         if self.limited:
             text += f" (wanted {self.wanted_gain_db:+.1f} dB: limited)"
         return text + f" (residual {self.residual_rms_db:.2f} dB RMS, {self.residual_max_db:.2f} dB max)"

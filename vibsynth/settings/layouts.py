@@ -72,8 +72,8 @@ class LayoutFileModel(SettingsModel):
     description: str = setting("", "what the layout is and how its axes point", allowed="text (a string)")
     channels: Annotated[dict[int, ChannelPosition], BeforeValidator(check_layout)] = setting(
         ...,
-        "output channel (1-based) -> {x, y, z, name} in metres",
-        allowed="a mapping {output channel 1..64: {x: m, y: m, z: m (default 0), name: text}}",
+        "output channel (1-based) -> {x, y, z, name} in metres, and optionally its actuator profile",
+        allowed="a mapping {output channel 1..64: {x: m, y: m, z: m (default 0), name: text, profile: name}}",
         schema={"propertyNames": {"pattern": "^[1-9][0-9]*$"}},
         min_length=1,
     )
