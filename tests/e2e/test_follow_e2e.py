@@ -64,13 +64,22 @@ def serve_env(folder: Path) -> dict[str, str]:
 class Served:
     """``vibsynth serve`` on JACK in a child process (its own GIL: the Python JACK clients here keep
     their cycles), following ``device`` (``system:1,2``) in mode ``follow`` unless it is None (``extra``: more
-    ``follow:`` keys, indented); ``in_ports`` are its input ports."""
+    ``follow:`` keys, indented; ``top``: more top-level sections); ``in_ports`` are its input ports."""
 
     def __init__(
-        self, folder: Path, follow: str | None = "vibration", device: str = "system:1,2", extra: str = ""
+        self,
+        folder: Path,
+        follow: str | None = "vibration",
+        device: str = "system:1,2",
+        extra: str = "",
+        channels: int = 1,
+        top: str = "",
     ) -> None:
         folder.mkdir(parents=True, exist_ok=True)
-        config = "audio:\n  rate: 48000\n  block_size: 128\nknobs:\n  glide_ms: 0\nstudio:\n  enabled: false\n"
+        config = (
+            f"audio:\n  rate: 48000\n  block_size: 128\n  channels: {channels}\nknobs:\n  glide_ms: 0\n"
+            f"studio:\n  enabled: false\n{top}"
+        )
         if follow is not None:
             config += f"follow:\n  enabled: true\n  device: '{device}'\n  mode: {follow}\n{extra}"
         before = jack_ports()
