@@ -17,13 +17,17 @@ values get an error reply naming the range from the typed settings; nothing chan
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from vibsynth.control.controller import Controller
 from vibsynth.control.follow import follower_of
-from vibsynth.control.follow.follower import Follower
 from vibsynth.control.osc.codec import Message, encode_message
 from vibsynth.control.osc.methods import Getter, Method, arg_count, flag, number, string
 from vibsynth.control.osc.workers import PeerLike
 from vibsynth.errors import ParameterError, VibsynthError
+
+if TYPE_CHECKING:  # the follower brings the tracker's scipy.signal: every command would import it at start
+    from vibsynth.control.follow.follower import Follower
 
 __all__ = ["FollowMethods", "FOLLOW_ADDRESSES", "NOT_RUNNING"]
 
