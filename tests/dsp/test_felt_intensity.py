@@ -55,3 +55,22 @@ def test_a_band_alone_is_the_paper_filter_between_its_edges():
 def test_bad_profiles_are_refused(args):
     with pytest.raises(ParameterError):
         profile_weighting(*args)
+
+
+def test_the_skin_weighting_does_not_take_the_response_s_curvature_between_the_weighting_s_points():
+    """R and W have different points (W resampled after its derivation): S is read at W's points, where it is -C."""
+    r_freqs = np.geomspace(5.0, 2000.0, 300)
+    x = r_freqs / 45.0
+    r_db = 20 * np.log10(x**2 / np.abs(1 - x**2 + 1j * x / 2.0))  # a 45 Hz, Q 2 voice coil
+    fine = np.geomspace(10.0, 1000.0, 1000)
+    r_fine = np.interp(np.log(fine), np.log(r_freqs), r_db)
+    w_fine, band = device_band(fine, r_fine)
+    w_freqs = np.geomspace(10.0, 1000.0, 81)
+    w_db = np.interp(np.log(w_freqs), np.log(fine), w_fine)
+    weighting = profile_weighting(np.c_[r_freqs, r_db], np.c_[w_freqs, w_db], band)
+    between = r_freqs[(r_freqs >= 10.0) & (r_freqs <= 1000.0)]  # mostly between W's points
+    skin = -model_iso_curve_db(between)
+    got = 10 * np.log10(weighting.power_weights(between))
+    want = skin - skin.max()
+    above = want > WEIGHT_FLOOR_DB + 10
+    assert np.abs(got - want)[above].max() < 0.05 and np.all(got[~above] >= WEIGHT_FLOOR_DB)

@@ -194,7 +194,7 @@ def profile_weighting(
     -------
     weighting : IntensityWeighting
         ``kind="weighting"`` with ``S = W - R`` (0 dB at its top, floored at
-        :data:`WEIGHT_FLOOR_DB`) on the union of both point sets; ``kind="band"`` with only
+        :data:`WEIGHT_FLOOR_DB`) at the weighting's points (the response interpolated there); ``kind="band"`` with only
         ``band_hz``; :data:`PAPER_WEIGHTING` with neither.
     """
     band: tuple[float, float] | None = None
@@ -209,11 +209,10 @@ def profile_weighting(
         return IntensityWeighting(kind="band", band_hz=band, source=source)
     w = _check_points(weighting, f"{source}: weighting")
     r = _check_points(response, f"{source}: response")
-    grid = np.union1d(w[:, 0], r[:, 0])
-    grid = grid[(grid >= w[0, 0]) & (grid <= w[-1, 0])]
-    s = _interp_db(w, grid) - _interp_db(r, grid)
+    grid = w[:, 0]  # where W was derived from R: R read there makes S exact at every point
+    s = w[:, 1] - _interp_db(r, grid)
     s = np.maximum(s - s.max(), WEIGHT_FLOOR_DB)
     points = tuple((float(f), round(float(v), 4)) for f, v in zip(grid, s, strict=True))
     if band is None:
-        band = intensity_band(grid, _interp_db(w, grid))
+        band = intensity_band(grid, w[:, 1])
     return IntensityWeighting(kind="weighting", points=points, band_hz=band, source=source)
