@@ -105,4 +105,10 @@ def run_response(args: argparse.Namespace) -> int:
             f"(20-800 Hz), sweeps agree within {m.repeatability_db:.2f} dB, peak {m.response_db.max():.1f} dB at "
             f"{m.freqs[int(m.response_db.argmax())]:.0f} Hz -> {path}"
         )
+    if len(paths) > 1 and all(p.parent == user_profile_dir() for p in paths):
+        pattern = paths[0].stem.removesuffix(f"-ch{results[0].channel}") + "-ch{n}"
+        print(
+            f"serve every channel with its own profile: --set 'actuator.channel_profiles={pattern}' "
+            "(docs/calibration.md)"
+        )
     return 0
