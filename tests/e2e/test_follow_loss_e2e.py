@@ -33,7 +33,7 @@ import sys, time, threading
 import numpy as np
 import jack
 
-level_db, seconds = float(sys.argv[1]), float(sys.argv[2])
+level_db, seconds, into = float(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
 client = jack.Client("vibsynth-loss-player", no_start_server=True)
 fs = client.samplerate
 ports = [client.outports.register(f"out_{k}") for k in (1, 2)]
@@ -51,10 +51,13 @@ def process(frames):
 
 
 client.activate()
-targets = sorted(
-    (p.name for p in client.get_ports(name_pattern="PortAudio", is_audio=True, is_input=True)),
-    key=lambda n: (len(n), n),
-)
+if into == "playback":  # the speakers: serve --follow monitor follows what feeds them
+    targets = ["system:playback_1", "system:playback_2"]
+else:
+    targets = sorted(
+        (p.name for p in client.get_ports(name_pattern="PortAudio", is_audio=True, is_input=True)),
+        key=lambda n: (len(n), n),
+    )
 for p, t in zip(ports, targets[:2]):
     client.connect(p, t)
 print("playing", targets[:2], flush=True)
@@ -67,15 +70,17 @@ client.close()
 class Player:
     """A tone into serve's input ports from a subprocess (no JACK client in the test process)."""
 
-    def __init__(self, level_db: float, seconds: float = 30.0) -> None:
+    def __init__(self, level_db: float, into: str, seconds: float = 30.0) -> None:
         self.proc = subprocess.Popen(
-            [sys.executable, "-c", _PLAYER, str(level_db), str(seconds)],
+            [sys.executable, "-c", _PLAYER, str(level_db), str(seconds), into],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
         )
         line = self.proc.stdout.readline()
-        assert "PortAudio" in line, f"the player found no input port: {line!r} {self.proc.stderr.read()[-2000:]}"
+        assert "PortAudio" in line or "playback" in line, (
+            f"the player found no input port: {line!r} {self.proc.stderr.read()[-2000:]}"
+        )
 
     def stop(self) -> None:
         if self.proc.poll() is None:
@@ -98,21 +103,22 @@ def level_near(db: float):
     return lambda s: abs(float(s.get("follow.level_db", -200.0)) - db) < 2.0
 
 
-@pytest.mark.parametrize("on_loss", ["fade", "hold"])
-def test_a_killed_jack_server_loses_the_follow_input_and_it_recovers(private_jack, tmp_path, on_loss):  # noqa: F811
+@pytest.mark.parametrize(("device", "on_loss"), [("system:1,2", "fade"), ("system:1,2", "hold"), ("monitor", "fade")])
+def test_a_killed_jack_server_loses_the_follow_input_and_it_recovers(private_jack, tmp_path, device, on_loss):  # noqa: F811
     config = tmp_path / "config.yaml"
     config.write_text(
         "audio: {rate: 48000, block_size: 128}\nknobs: {glide_ms: 0}\nstudio: {enabled: false}\n"
-        f"follow: {{enabled: true, device: 'system:1,2', mode: vibration, on_loss: {on_loss}, fade_s: 0.5}}\n"
+        f"follow: {{enabled: true, device: '{device}', mode: vibration, on_loss: {on_loss}, fade_s: 0.5}}\n"
     )
     private_jack.env.update(VIBSYNTH_CONFIG=str(config), XDG_CONFIG_HOME=str(tmp_path / "xdg"))
     serve = Serve(tmp_path, private_jack)
+    into = "playback" if device == "monitor" else "inputs"
     player = None
     try:
         serve.wait_state("streaming", 10.0)
         status, _ = wait_for(serve, lambda s: "(open)" in s.get("follow.device", ""), "the input did not open")
         quiet = status["follow.level_db"]
-        player = Player(-50.0)
+        player = Player(-50.0, into)
         status, _ = wait_for(serve, level_near(-50.0), "the tone was not followed")
         playing = status["ch1.intensity"]
         assert quiet < -100 and playing == pytest.approx(0.75, abs=0.05)  # -50 dB -> knob 0.75
@@ -142,15 +148,16 @@ def test_a_killed_jack_server_loses_the_follow_input_and_it_recovers(private_jac
         back = private_jack.start()
         wait_for(serve, lambda s: s.get("output") == "streaming", "the output did not come back")
         status, _ = wait_for(serve, lambda s: "(open)" in s.get("follow.device", ""), "the input did not reopen")
-        player = Player(-60.0)
+        player = Player(-60.0, into)
         status, seen = wait_for(serve, level_near(-60.0), "the tracked level did not follow the new tone")
         recovered = seen - back
         assert status["follow.losses"] == 1
         assert status["ch1.intensity"] == pytest.approx(0.5, abs=0.05)  # -60 dB -> knob 0.5
         log = serve.log()
         print(
-            f"\n[{on_loss}] JACK killed -> follow.device {device_lost!r} in {1000 * reported:.0f} ms; ch1 intensity "
-            f"{playing:.3f} -> {during['ch1.intensity']:.3f} during the loss; server back -> a -60 dB tone tracked "
+            f"\n[{device}, {on_loss}] JACK killed -> follow.device {device_lost!r} in {1000 * reported:.0f} ms; "
+            f"ch1 intensity {playing:.3f} -> {during['ch1.intensity']:.3f} during the loss; server back -> "
+            "a -60 dB tone tracked "
             f"({status['follow.level_db']:.1f} dB) in {recovered:.2f} s"
         )
         said = "holding" if on_loss == "hold" else "fading out"

@@ -7,9 +7,10 @@ from types import SimpleNamespace
 
 import pytest
 
-from vibsynth.engine import monitor
+from vibsynth.engine import monitor, monitor_patchbay
 from vibsynth.engine.inputs import open_input
-from vibsynth.engine.monitor import JackPatcher, MonitorInput, import_jack, is_monitor_spec
+from vibsynth.engine.monitor import MonitorInput, is_monitor_spec
+from vibsynth.engine.monitor_patchbay import JackPatcher, import_jack
 from vibsynth.errors import DeviceError
 
 
@@ -56,6 +57,8 @@ class FakePort(SimpleNamespace):
 class FakeClient:
     """A JACK graph: port names -> kind, and a set of (source, destination) connections."""
 
+    name = "vibsynth-monitor-1"
+
     def __init__(self, graph):
         self.graph = graph
 
@@ -89,9 +92,7 @@ def test_the_patcher_connects_what_feeds_the_playback_ports_to_our_new_ports_and
             ("game:R", "system:playback_2"),
         },
     )
-    fake_jack = SimpleNamespace(Client=lambda name, no_start_server: FakeClient(graph))
-    monkeypatch.setattr(monitor, "import_jack", lambda: fake_jack)
-    patcher = JackPatcher(2)
+    patcher = JackPatcher(FakeClient(graph), 2)
     patcher.snapshot()  # before our stream opens: PortAudio:in_* belong to someone else
     graph.inputs += ["PortAudio-01:in_0", "PortAudio-01:in_1"]
     graph.links.add(("system:capture_1", "PortAudio-01:in_0"))  # PortAudio's own auto-connection
@@ -111,15 +112,22 @@ def test_the_patcher_connects_what_feeds_the_playback_ports_to_our_new_ports_and
     assert patcher.sources == ["game:R", "video:out"]
 
 
-def test_a_server_that_goes_away_is_counted_and_patched_again_when_it_is_back(monkeypatch):
-    calls = {"n": 0}
-
-    def client(name, no_start_server):
-        calls["n"] += 1
-        raise RuntimeError("Error initializing client")
-
-    monkeypatch.setattr(monitor, "import_jack", lambda: SimpleNamespace(Client=client))
-    patcher = JackPatcher(2)
+def test_a_restarted_server_patches_the_ports_of_the_same_name_again():
+    graph = SimpleNamespace(
+        inputs=["system:playback_1", "PortAudio:in_0", "PortAudio:in_1"],
+        outputs=["game:L"],
+        links={("game:L", "system:playback_1")},
+    )
+    patcher = JackPatcher(FakeClient(graph), 2, own=["PortAudio:in_0", "PortAudio:in_1"])
+    patcher.snapshot()  # the child starts after serve's input reopened: its ports are there already
     patcher.poll()
-    patcher.poll()
-    assert patcher.errors == 2 and calls["n"] == 2 and "Error initializing client" in patcher.reason
+    assert patcher.own == ["PortAudio:in_0", "PortAudio:in_1"] and ("game:L", "PortAudio:in_0") in graph.links
+
+
+def test_the_patch_bay_says_why_it_cannot_run_and_exits(monkeypatch, capsys):
+    def no_jack():
+        raise DeviceError("the JACK monitor input needs the JACK-Client package (gone)")
+
+    monkeypatch.setattr(monitor_patchbay, "import_jack", no_jack)
+    assert monitor_patchbay.main(["--parent", "1"]) == 3
+    assert '{"error": "JACK: the JACK monitor input needs the JACK-Client package (gone)"}' in capsys.readouterr().out

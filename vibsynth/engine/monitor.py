@@ -3,11 +3,13 @@
 :class:`MonitorInput` is an :class:`~vibsynth.engine.inputs.InputSource` that picks, in order:
 
 * **JACK** (the host API in use, or a JACK server that answers): a PortAudio input on JACK whose
-  ports (``PortAudio:in_N``) a worker thread connects to whatever feeds the system's playback
+  ports (``PortAudio:in_N``) a patch bay connects to whatever feeds the system's playback
   ports (``system:playback_N``), excluding vibsynth's own outputs; it looks again every
-  ``poll_s`` (never in the audio callback), so new connections are followed as they come and a
-  JACK server that comes back is patched again. Needs the JACK-Client package (``jack``): an
-  optional import (``pip install 'vibsynth[monitor]'``).
+  ``poll_s`` (never in the audio callback), so new connections are followed as they come. The
+  patch bay is a child process (:mod:`vibsynth.engine.monitor_patchbay`: a JACK client must not
+  outlive its server in serve's process) started again when it ends, so a JACK server that
+  comes back is patched again. It needs the JACK-Client package (``jack``), imported in the child
+  only (``pip install 'vibsynth[monitor]'``; without it, one message says so).
 * **PulseAudio / PipeWire**: PortAudio's ALSA ``pulse`` or ``pipewire`` device, recording the
   default output's monitor (``PULSE_SOURCE=@DEFAULT_MONITOR@``).
 * **Windows WASAPI**: the first input device PortAudio lists as a ``[Loopback]``.
@@ -18,9 +20,11 @@ naming what was tried.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
-import re
+import subprocess
+import sys
 import threading
 from types import ModuleType
 from typing import Any
@@ -30,14 +34,12 @@ from vibsynth.engine.inputs import SoundDeviceInput
 from vibsynth.engine.pa_stream import import_sounddevice
 from vibsynth.errors import DeviceError
 
-__all__ = ["MONITOR", "MonitorInput", "JackPatcher", "is_monitor_spec"]
+__all__ = ["MONITOR", "MonitorInput", "PatchBay", "is_monitor_spec"]
 
 log = logging.getLogger(__name__)
 
 #: The ``--follow`` / ``follow.device`` word that asks for the monitor input.
 MONITOR = "monitor"
-#: Input ports a PortAudio client holds on JACK (``PortAudio``, or ``PortAudio-01`` when taken).
-_PA_IN = re.compile(r"^(PortAudio[^:]*):in_(\d+)$")
 _PULSE_DEVICES = ("pulse", "pipewire")
 
 
@@ -46,106 +48,104 @@ def is_monitor_spec(spec: str) -> bool:
     return spec.strip().lower() == MONITOR
 
 
-def import_jack() -> ModuleType:
-    """The JACK-Client package, or one clear :class:`DeviceError` saying how to get it."""
-    try:
-        import jack
-    except (ImportError, OSError) as exc:
-        raise DeviceError(
-            f"the JACK monitor input needs the JACK-Client package ({exc}): pip install 'vibsynth[monitor]'"
-        ) from None
-    module: ModuleType = jack
-    return module
-
-
-class JackPatcher:
-    """Connects our PortAudio input ports to what feeds ``system:playback_N`` (a worker's job, polled).
+class PatchBay:
+    """The JACK patch bay child (:mod:`vibsynth.engine.monitor_patchbay`), started again whenever it ends.
 
     Parameters
     ----------
     channels : int
-        Our input ports; playback port ``k`` (0-based) feeds ours ``k mod channels``.
-    client_name : str
-        The patch-bay client's JACK name.
+    poll_s : float
+        The child's polling period; a child that ended is started again after ``4 poll_s``.
     """
 
-    def __init__(self, channels: int, client_name: str = "vibsynth-monitor") -> None:
-        self.jack = import_jack()
+    def __init__(self, channels: int, poll_s: float = 0.25) -> None:
         self.channels = int(channels)
-        self.client_name = client_name
-        self._client: Any = None
-        self._seen: set[str] | None = None
-        #: our PortAudio client's input ports, in order (found when they appear)
+        self.poll_s = float(poll_s)
         self.own: list[str] = []
-        #: the ports feeding the system's playback, as connected last
         self.sources: list[str] = []
         self.connections = 0
-        self.errors = 0
+        self.starts = 0
         self.reason = ""
+        self._done_connections = 0
+        self._proc: subprocess.Popen[str] | None = None
+        self._ready = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
 
-    def _connect(self) -> Any:
-        if self._client is None:
-            self._client = self.jack.Client(self.client_name, no_start_server=True)
-        return self._client
+    def _spawn(self) -> None:
+        cmd = [
+            sys.executable,
+            "-m",
+            "vibsynth.engine.monitor_patchbay",
+            "--channels",
+            str(self.channels),
+            "--parent",
+            str(os.getpid()),
+            "--poll",
+            str(self.poll_s),
+            "--own",
+            ",".join(self.own),
+        ]
+        self._done_connections += self.connections if self.starts else 0
+        self.connections = 0
+        self._ready.clear()
+        self._proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        self.starts += 1
+        threading.Thread(target=self._read, args=(self._proc,), name="vibsynth-monitor-read", daemon=True).start()
+
+    def _read(self, proc: subprocess.Popen[str]) -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            try:
+                message = json.loads(line)
+            except ValueError:
+                continue
+            if "error" in message:
+                self.reason = str(message["error"])
+            if message.get("ready"):
+                self.reason = ""
+                self._ready.set()
+            if "own" in message:
+                self.own = list(message["own"])
+                self.sources = list(message["sources"])
+                self.connections = int(message["connections"])
+        proc.wait()
+        self._ready.set()  # an early exit wakes start()
+
+    def start(self, timeout: float = 10.0) -> None:
+        """Start the child and wait until it noted the ports there are (raises DeviceError with its reason)."""
+        self._spawn()
+        self._ready.wait(timeout)
+        assert self._proc is not None
+        if self._proc.poll() is not None or not self._ready.is_set():
+            self.close()
+            raise DeviceError(self.reason or "the JACK patch bay did not start")
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._watch, name="vibsynth-monitor", daemon=True)
+        self._thread.start()
+
+    def _watch(self) -> None:
+        while not self._stop.wait(4 * self.poll_s):
+            if self._proc is not None and self._proc.poll() is not None:
+                self._spawn()  # the server went (and maybe came back): patch it again
+
+    @property
+    def total_connections(self) -> int:
+        return self._done_connections + self.connections
 
     def close(self) -> None:
-        client, self._client = self._client, None
-        if client is not None:
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(timeout=2.0)
+        proc, self._proc = self._proc, None
+        if proc is not None and proc.poll() is None:
+            proc.terminate()
             try:
-                client.close()
-            except Exception:  # noqa: BLE001 - a dead server: nothing left to close
-                pass
-
-    def _in_ports(self, client: Any) -> set[str]:
-        return {p.name for p in client.get_ports(is_audio=True, is_input=True) if _PA_IN.match(p.name)}
-
-    def snapshot(self) -> None:
-        """Note the PortAudio input ports there are now: the ones that appear later are ours."""
-        try:
-            self._seen = self._in_ports(self._connect())
-        except Exception as exc:  # noqa: BLE001 - no server yet: every PortAudio port counts as new
-            self.reason = f"JACK: {exc}"
-            self._seen = set()
-
-    def poll(self) -> None:
-        """Find our ports (once they appear), then connect each to every feeder of its playback ports."""
-        try:
-            self._poll()
-        except Exception as exc:  # noqa: BLE001 - the server went away: connect again next time
-            self.errors += 1
-            self.reason = f"JACK: {exc}"
-            self.close()
-
-    def _poll(self) -> None:
-        client = self._connect()
-        ins = self._in_ports(client)
-        if not self.own or not set(self.own) <= ins:
-            new = sorted(ins - (self._seen or set()), key=lambda n: int(_PA_IN.match(n).group(2)))  # type: ignore[union-attr]
-            owners = {_PA_IN.match(n).group(1) for n in new}  # type: ignore[union-attr]
-            self.own = new if len(owners) == 1 and len(new) >= self.channels else []
-        self._seen = ins
-        if not self.own:
-            return
-        ours = self.own[0].split(":", 1)[0] + ":"
-        wanted: dict[str, set[str]] = {name: set() for name in self.own[: self.channels]}
-        playback = client.get_ports(is_audio=True, is_input=True, is_physical=True)
-        sources: list[str] = []
-        for k, port in enumerate(playback):
-            for feeder in client.get_all_connections(port):
-                if feeder.name.startswith(ours) or feeder.name.startswith(self.client_name + ":"):
-                    continue  # vibsynth's own outputs do not feed its input
-                wanted[self.own[k % self.channels]].add(feeder.name)
-                sources.append(feeder.name)
-        for name, feeders in wanted.items():
-            port = client.get_port_by_name(name)
-            have = {p.name for p in client.get_all_connections(port)}
-            for feeder in sorted(feeders - have):
-                client.connect(feeder, name)
-                self.connections += 1
-            for stale in sorted(have - feeders):  # PortAudio's own link to system:capture, gone sources
-                client.disconnect(stale, name)
-        self.sources = sorted(set(sources))
-        self.reason = ""
+                proc.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
 
 class MonitorInput:
@@ -184,9 +184,7 @@ class MonitorInput:
         self.device_options = device_options
         self.path = ""  # "JACK", "PulseAudio", "WASAPI loopback" once opened
         self.inner: SoundDeviceInput | None = None
-        self.patcher: JackPatcher | None = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self.patcher: PatchBay | None = None
 
     # -------------------------------------------------------------- InputSource
     @property
@@ -235,26 +233,15 @@ class MonitorInput:
         wanted = self.host_api
         if wanted is not None and "jack" not in str(wanted).lower() and not str(wanted).isdigit():
             raise DeviceError(f"the output uses host API {wanted!r}")
-        patcher = JackPatcher(self.channels)
-        patcher.snapshot()
-        if patcher.reason:
-            raise DeviceError(patcher.reason)
+        patchbay = PatchBay(self.channels, self.poll_s)
+        patchbay.start()  # it notes the ports there are: the input's, opened next, are ours
         inner = self._inner("", "JACK")
         try:
             inner.open()
         except DeviceError:
-            patcher.close()
+            patchbay.close()
             raise
-        self.inner, self.patcher = inner, patcher
-        patcher.poll()
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="vibsynth-monitor", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.wait(self.poll_s):
-            if self.patcher is not None:
-                self.patcher.poll()
+        self.inner, self.patcher = inner, patchbay
 
     def _open_pulse(self, sd: ModuleType) -> None:
         names = [str(d["name"]) for d in sd.query_devices() if int(d.get("max_input_channels", 0)) > 0]
@@ -283,10 +270,6 @@ class MonitorInput:
         self.inner = inner
 
     def close(self) -> None:
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(timeout=2.0)
         if self.inner is not None:
             self.inner.close()
         if self.patcher is not None:
@@ -300,8 +283,8 @@ class MonitorInput:
         status["monitor"] = self.path
         if self.patcher is not None:
             status["monitor_sources"] = list(self.patcher.sources)
-            status["monitor_connections"] = self.patcher.connections
-            status["monitor_errors"] = self.patcher.errors
+            status["monitor_connections"] = self.patcher.total_connections
+            status["monitor_patchbay_starts"] = self.patcher.starts
         feeds = (
             ", ".join(self.patcher.sources) or "nothing playing"
             if self.patcher is not None
