@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import pytest
 
 from vibsynth.engine import monitor, monitor_patchbay
-from vibsynth.engine.inputs import open_input
+from vibsynth.engine.inputs import SoundDeviceInput, open_input
 from vibsynth.engine.monitor import MonitorInput, is_monitor_spec
 from vibsynth.engine.monitor_patchbay import JackPatcher, import_jack
 from vibsynth.errors import DeviceError
@@ -37,7 +37,7 @@ def test_no_monitor_anywhere_is_one_message_naming_what_was_tried(monkeypatch):
     sd = FakeSoundDevice([{"name": "ALSA"}], [{"name": "hw:0,0", "hostapi": 0, "max_input_channels": 2}])
     monkeypatch.setattr(monitor, "import_sounddevice", lambda: sd)
     with pytest.raises(DeviceError) as info:
-        MonitorInput(fs=48000.0).open()
+        MonitorInput(fs=48000.0, device_input=SoundDeviceInput).open()
     message = str(info.value)
     assert message.startswith("no loopback/monitor input on this system; tried JACK: PortAudio has no JACK host API")
     assert "PulseAudio/PipeWire: PortAudio lists no 'pulse' or 'pipewire' input device" in message

@@ -539,5 +539,5 @@ def open_input(
     from vibsynth.engine.monitor import MonitorInput, is_monitor_spec  # it builds on this module
 
     if is_monitor_spec(text):
-        return MonitorInput(fs=fs, **device_options)
+        return MonitorInput(fs=fs, device_input=SoundDeviceInput, **device_options)
     return SoundDeviceInput(text, fs=fs, **device_options)

@@ -26,13 +26,16 @@ import os
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from vibsynth.engine.input_ring import InputRing
-from vibsynth.engine.inputs import SoundDeviceInput
 from vibsynth.engine.pa_stream import import_sounddevice
 from vibsynth.errors import DeviceError
+
+if TYPE_CHECKING:  # open_input (in inputs) makes monitor inputs: the class comes in as device_input
+    from vibsynth.engine.inputs import SoundDeviceInput
 
 __all__ = ["MONITOR", "MonitorInput", "PatchBay", "is_monitor_spec"]
 
@@ -162,14 +165,18 @@ class MonitorInput:
         Inputs to capture (2: stereo).
     poll_s : float
         How often the JACK worker looks at the graph.
+    device_input : callable
+        Makes the PortAudio input (:class:`~vibsynth.engine.inputs.SoundDeviceInput`) from a spec,
+        ``fs``, ``host_api``, ``block_size`` and ``device_options``.
     device_options
-        Passed to :class:`~vibsynth.engine.inputs.SoundDeviceInput`.
+        Passed to ``device_input``.
     """
 
     def __init__(
         self,
         *,
         fs: float,
+        device_input: Callable[..., SoundDeviceInput],
         host_api: str | int | None = None,
         block_size: int = 128,
         channels: int = 2,
@@ -177,6 +184,7 @@ class MonitorInput:
         **device_options: Any,
     ) -> None:
         self._fs = float(fs)
+        self.device_input = device_input
         self.host_api = host_api
         self.block_size = int(block_size)
         self.channels = int(channels)
@@ -218,7 +226,7 @@ class MonitorInput:
 
     def _inner(self, spec: str, host_api: str | int | None) -> SoundDeviceInput:
         channels = ",".join(str(c + 1) for c in range(self.channels))
-        return SoundDeviceInput(
+        return self.device_input(
             f"{spec}:{channels}" if spec else f":{channels}",
             fs=self._fs,
             host_api=host_api,
