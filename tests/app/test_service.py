@@ -59,3 +59,55 @@ def test_serve_takes_the_typed_settings_and_validates_nothing(tmp_path, monkeypa
     assert serve(settings, args) == 0
     assert "serving 1 channel(s) on null output" in capsys.readouterr().out
     assert full_validations == []
+
+
+def _profile(folder, name, points, *, weighting=None):
+    folder.mkdir(parents=True, exist_ok=True)
+    lines = [f"name: {name}", "absolute: true", "rate: 16000", f"response: {points}"]
+    if weighting is not None:
+        lines.append(f"weighting: {weighting}")
+    (folder / f"{name}.yaml").write_text("\n".join(lines) + "\n")
+
+
+def test_build_engine_trims_the_channels_with_their_own_profiles(tmp_path, monkeypatch):
+    """Layout profiles and actuator.channel_profiles reach the engine: a bank for the mean, each channel trimmed."""
+    import numpy as np
+
+    from vibsynth.app.service import build_engine
+    from vibsynth.settings.config import load_config
+
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "cfg"))
+    folder = tmp_path / "cfg" / "vibsynth" / "actuators"
+    _profile(folder, "low", [[10, -6], [60, 6], [1000, -6]])
+    _profile(folder, "high", [[10, -20], [300, 4], [1000, 4]])
+    small = {"rate": 16000, "channels": 3}
+    bank = {"levels": 9, "loop_seconds": 1.0, "cache_dir": ""}
+    layout = {1: {"x": 0, "y": 0, "profile": "low"}, 2: {"x": 1, "y": 0, "profile": "high"}, 3: {"x": 2, "y": 0}}
+    overrides = {"audio": small, "bank": bank, "layout": layout, "actuator": {"profile": "low", "max_boost_db": 40}}
+    engine = build_engine(load_config(overrides=overrides, user_file=False).settings)
+    engine.render(64)
+    trims = engine.trim_values()
+    # channels 1 and 3 play 'low', channel 2 'high': the bank is their mean, all three trimmed, 1 and 3 alike
+    assert trims[0] == trims[2] and trims[0] != (0.0, 1.0) and trims[1] != trims[0]
+    assert np.sign(trims[1][0]) != np.sign(trims[0][0])  # one brighter, one darker than the mean
+    assert engine.bank.key["actuator"][0] != [[10, -6], [60, 6], [1000, -6]]
+    overrides["actuator"]["channel_profiles"] = ["high", "high", "high"]  # wins over the layout's
+    engine = build_engine(load_config(overrides=overrides, user_file=False).settings)
+    engine.render(64)
+    assert engine.trim_values() == [(0.0, 1.0)] * 3  # one response for all: the bank is built for it
+
+
+def test_a_calibrated_profile_sets_what_the_bank_s_level_means(tmp_path, monkeypatch):
+    from vibsynth.app.service import build_engine
+    from vibsynth.settings.config import load_config
+
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "cfg"))
+    folder = tmp_path / "cfg" / "vibsynth" / "actuators"
+    _profile(folder, "cal", [[10, -10], [100, 0], [1000, 0]], weighting=[[10, -30], [150, 0], [1000, -30]])
+    _profile(folder, "plain", [[10, -10], [100, 0], [1000, 0]])
+    bank = {"levels": 9, "loop_seconds": 1.0, "cache_dir": ""}
+    keys = {}
+    for name in ("cal", "plain"):
+        overrides = {"audio": {"rate": 16000}, "bank": bank, "actuator": {"profile": name}}
+        keys[name] = build_engine(load_config(overrides=overrides, user_file=False).settings).bank.key
+    assert keys["cal"]["intensity"][0] == "weighting" and "intensity" not in keys["plain"]
