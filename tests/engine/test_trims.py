@@ -36,6 +36,28 @@ def test_a_trim_gain_reaches_its_channel_only_and_glides_in(small_bank):
     assert trimmed.trim_values() == [(0.0, 1.0), (0.0, pytest.approx(2.0))]
 
 
+def test_a_trim_sent_while_another_glides_in_waits_for_it_and_never_steps(small_bank):
+    plain, trimmed = make(small_bank, channels=1), make(small_bank, channels=1)
+    plain.render(256), trimmed.render(256)
+    glide = 160
+    seconds = glide / small_bank.fs
+    trimmed.set_trim(2.0, glide_s=seconds)
+    a, b = [plain.render(64)], [trimmed.render(64)]  # 64 samples into the first glide
+    trimmed.set_trim(0.5, glide_s=seconds)  # superseded while it waits: the newest wins
+    trimmed.set_trim(0.25, glide_s=seconds)
+    for _ in range(16):  # real-time blocks: the waiting trim starts at the end of the block its predecessor ends in
+        a.append(plain.render(64))
+        b.append(trimmed.render(64))
+    ratio = np.concatenate(b)[:, 0].astype(np.float64) / np.concatenate(a)[:, 0]
+    # 1 -> 2 over the first glide (ends 160 samples in, inside the third block), 2 held to that block's end
+    # (192), then 2 -> 0.25 over the next glide: linear steps of at most 1/glide and 1.75/glide, no jump
+    ramp = np.arange(1, glide + 1) / glide
+    want = np.concatenate([1.0 + ramp, np.full(32, 2.0), 2.0 - 1.75 * ramp, np.full(1088 - 2 * glide - 32, 0.25)])
+    assert np.allclose(ratio, want, rtol=1e-6)
+    assert np.abs(np.diff(ratio)).max() <= 1.75 / glide * (1 + 1e-4)  # float32 samples
+    assert trimmed.trim_values() == [(0.0, pytest.approx(0.25))]
+
+
 def test_a_balance_offset_plays_the_bank_where_balance_plus_offset_is(small_bank):
     offset = make(small_bank, initial_balance=0.5)
     moved = make(small_bank, initial_balance=0.75)

@@ -35,7 +35,8 @@
  * balance knob and a gain curve over the bank's levels, read at the channel's effective bank
  * position, both applied after every layer resolved the knobs (so direct knobs, follow, sources
  * and clips all get them) and before the limiter. A new trim glides in (a linear blend from the
- * previous curve, the offset ramped), so changing one never clicks. The producer keeps each
+ * previous curve, the offset ramped), so changing one never clicks; one that arrives while another
+ * still glides in waits for it (the newest waiting one wins) and starts at the end of that block. The producer keeps each
  * curve alive for the engine's lifetime.
  *
  * Output tap: every rendered frame is also copied into a ring of TAP_FRAMES frames, which
@@ -100,6 +101,11 @@ typedef struct vs_core {
     double vfade;
     /* trims: gain curves over the bank levels (NULL = 1), blended prev -> cur by R_TRIM_MIX */
     const float *tcur[MAXCH], *tprev[MAXCH];
+    /* a trim that came while the previous one still glided in: started when that glide ends */
+    const float *tpend[MAXCH];
+    double tpend_off[MAXCH];
+    int64_t tpend_len[MAXCH];
+    int tpend_on[MAXCH];
     /* output tap */
     float *tap;
     int64_t tap_frame; /* published: frames written to the tap */
@@ -197,6 +203,19 @@ static void heap_pop(Core *c, cmd_t *out) {
 }
 
 /* ------------------------------------------------------------------ commands (audio thread) */
+/* Start gliding channel ch from its current trim curve to `curve` (NULL = no trim) and its balance offset to `offset`. */
+static void trim_start(Core *c, int ch, const float *curve, double offset, int64_t samples, int64_t frame) {
+    c->tprev[ch] = c->tcur[ch];
+    c->tcur[ch] = curve;
+    ramps_t *mix = &c->ramps[R_TRIM_MIX];
+    mix->start[ch] = 0.0;
+    mix->delta[ch] = 0.0;
+    mix->pos[ch] = 1.0;
+    mix->len[ch] = 1.0;
+    ramp_move(mix, ch, 1.0, samples, frame);
+    ramp_move(&c->ramps[R_TRIM_BAL], ch, offset, samples, frame);
+}
+
 static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
     double fs = c->fs;
     switch (cmd->kind) {
@@ -274,15 +293,16 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
         int64_t samples = (int64_t)nearbyint(glide * fs);
         for (int ch = 0; ch < c->channels; ch++) {
             if (!(cmd->mask >> ch & 1)) continue;
-            c->tprev[ch] = c->tcur[ch];
-            c->tcur[ch] = cmd->ptr;
-            ramps_t *mix = &c->ramps[R_TRIM_MIX];
-            mix->start[ch] = 0.0;
-            mix->delta[ch] = 0.0;
-            mix->pos[ch] = 1.0;
-            mix->len[ch] = 1.0;
-            ramp_move(mix, ch, 1.0, samples, frame);
-            ramp_move(&c->ramps[R_TRIM_BAL], ch, cmd->value, samples, frame);
+            const ramps_t *mix = &c->ramps[R_TRIM_MIX];
+            if (mix->pos[ch] < mix->len[ch]) {
+                /* two curves blend at a time: a third waits (the newest wins) so the gain never steps */
+                c->tpend[ch] = cmd->ptr;
+                c->tpend_off[ch] = cmd->value;
+                c->tpend_len[ch] = samples;
+                c->tpend_on[ch] = 1;
+                continue;
+            }
+            trim_start(c, ch, cmd->ptr, cmd->value, samples, frame);
         }
         break;
     }
@@ -417,7 +437,13 @@ static void segment(Core *c, float *out, int64_t stride, const int *colmap, int6
     }
     for (int ch = 0; ch < c->channels; ch++) {
         const ramps_t *tm = &c->ramps[R_TRIM_MIX];
-        if (c->tprev[ch] && tm->pos[ch] >= tm->len[ch]) c->tprev[ch] = NULL;
+        if (tm->pos[ch] >= tm->len[ch]) {
+            c->tprev[ch] = NULL;
+            if (c->tpend_on[ch]) {
+                c->tpend_on[ch] = 0;
+                trim_start(c, ch, c->tpend[ch], c->tpend_off[ch], c->tpend_len[ch], frame + m);
+            }
+        }
         if (!c->vbuf[ch]) continue;
         const ramps_t *vr = &c->ramps[R_VOICE];
         if (c->vpos[ch] >= c->vlen[ch] || (c->vstop[ch] && vr->pos[ch] >= vr->len[ch])) {
