@@ -36,8 +36,8 @@
  * position, both applied after every layer resolved the knobs (so direct knobs, follow, sources
  * and clips all get them) and before the limiter. A new trim glides in (a linear blend from the
  * previous curve, the offset ramped), so changing one never clicks; one that arrives while another
- * still glides in waits for it (the newest waiting one wins) and starts at the end of that block. The producer keeps each
- * curve alive for the engine's lifetime.
+ * still glides in waits for it (the newest waiting one wins) and starts at the end of that block.
+ * The producer keeps each curve alive for the engine's lifetime.
  *
  * Output tap: every rendered frame is also copied into a ring of TAP_FRAMES frames, which
  * control threads read (Core.read_tap) for meters and spectra; the audio thread never waits.
