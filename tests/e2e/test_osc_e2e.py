@@ -109,6 +109,18 @@ def start_serve(
             return proc, port
 
 
+def wait_for_stream(status) -> None:
+    """Wait until ``status()`` (serve's /status) shows its audio stream running.
+
+    serve answers OSC before its stream runs (a loaded machine opens it later): tests that capture
+    its ports or compare its frames and underflows before and after start once it plays.
+    """
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while int(status()["frame"]) <= 0:
+        assert time.monotonic() < deadline, "serve's audio stream did not start"
+        time.sleep(0.05)
+
+
 def stop_serve(proc: subprocess.Popen) -> None:
     """Stop a ``vibsynth serve`` started by a test: SIGTERM, then SIGKILL if it hangs."""
     proc.terminate()
@@ -239,6 +251,11 @@ def jack_serve(tmp_path):
         unavailable("no JACK server reachable (run under scripts/with_jack.sh) or JACK-Client missing")
     env = dict(os.environ, VIBSYNTH_HOST_API="JACK", JACK_NO_AUDIO_RESERVATION="1")
     proc, port = start_serve(tmp_path, output="sounddevice", env=env)
+    probe = Client(port)
+    try:
+        wait_for_stream(probe.status)
+    finally:
+        probe.close()
     yield port
     stop_serve(proc)
 
@@ -270,6 +287,19 @@ def test_knob_set_over_osc_is_visible_in_jack_output(jack_serve):
     assert silent < 1e-6 and loud > 1e-3
 
 
+def _wall_and_frame(cap) -> tuple[float, int]:
+    """``time.time()`` and the JACK frame clock read together: a process descheduled between two reads
+    (a loaded machine) would pair the wall time with a later frame, so the pair is read again until
+    both frame reads fall within a millisecond."""
+    for _ in range(1000):
+        before = cap.frame_time_now()
+        wall = time.time()
+        after = cap.frame_time_now()
+        if after - before <= cap.rate // 1000:
+            return wall, (before + after) // 2
+    raise AssertionError("could not read the wall clock and the JACK frame clock within 1 ms of each other")
+
+
 @REALTIME
 def test_timetagged_bundle_starts_on_time(jack_serve):
     """A bundle timetagged 0.5 s ahead starts the vibration 0.5 s after it was sent (JACK frame clock)."""
@@ -279,7 +309,7 @@ def test_timetagged_bundle_starts_on_time(jack_serve):
     try:
         client.send("/vibsynth/glide", 0.0)
         client.request("/vibsynth/sync", 1, expect="/vibsynth/synced")
-        errors = []
+        sent: list[int] = []
         with JackCapture(7.0) as cap:
             cap.connect(portaudio_output_ports(cap.client)[:1])
             cap.arm()
@@ -287,20 +317,29 @@ def test_timetagged_bundle_starts_on_time(jack_serve):
             for _k in range(6):
                 client.send("/vibsynth/intensity", 0.0)
                 time.sleep(0.2)
-                wall = time.time()
-                frame_sent = cap.frame_time_now()
+                wall, frame_sent = _wall_and_frame(cap)
                 bundle = encode_bundle(unix_to_ntp(wall + 0.5), [encode_message("/vibsynth/intensity", (0.8,), "f")])
                 client.sock.sendto(bundle, client.target)
                 time.sleep(0.7)
-                errors.append((frame_sent, cap))
+                sent.append(frame_sent)
             assert cap.wait()
-            data, start, rate = cap.data[:, 0], cap.start_frame, cap.rate
-        offsets = []
-        for frame_sent, _ in errors:
-            expected = frame_sent - start + int(0.5 * rate)
-            onset = np.flatnonzero(np.abs(data[expected - int(0.1 * rate) : expected + int(0.1 * rate)]) > 1e-7)
-            assert onset.size, "no onset within 100 ms of the timetag"
-            offsets.append((onset[0] - int(0.1 * rate)) / rate)
+            data, rate = cap.data[:, 0], cap.rate
+            offsets = []
+            for frame_sent in sent:
+                due = frame_sent + int(0.5 * rate)  # the timetag on the JACK frame clock
+                # through the capture's own block frames: a cycle it missed under load does not shift this
+                lo, hi = cap.index_of(due - int(0.1 * rate)), cap.index_of(due + int(0.1 * rate))
+                onset = np.flatnonzero(np.abs(data[lo:hi]) > 1e-7)
+                if not onset.size:
+                    sent_at = cap.index_of(frame_sent)
+                    later = np.flatnonzero(np.abs(data[sent_at:]) > 1e-7)
+                    first = (cap.frame_of(sent_at + int(later[0])) - due) / rate if later.size else None
+                    raise AssertionError(
+                        f"no onset within 100 ms of the timetag (the first sound after sending is at "
+                        f"{first} s from the timetag; capture gaps {cap.gaps}; all onsets so far {offsets})"
+                    )
+                offsets.append((cap.frame_of(lo + int(onset[0])) - due) / rate)
+            print(f"\ncapture gaps {cap.gaps}", end="")
     finally:
         client.close()
     print(f"\ntimetag error (onset - timetag): {', '.join(f'{1e3 * o:+.2f} ms' for o in offsets)}")
@@ -398,6 +437,7 @@ def limits_serve(tmp_path_factory):
     )
     env = dict(os.environ, VIBSYNTH_HOST_API="JACK", JACK_NO_AUDIO_RESERVATION="1")
     proc, port = start_serve(tmp, output="sounddevice", env=env, extra_config=extra, ready=ready)
+    wait_for_stream(lambda: _dump_status(port, dump))
     yield port, dump, host_ip
     stop_serve(proc)
     dump.close()
@@ -413,32 +453,49 @@ def _dump_status(port: int, dump: OscDump) -> dict[str, str]:
     return _status_from_dump(dump.wait_for("/vibsynth/status.reply"))
 
 
+def _error_reply_s(port: int, dump: OscDump, address: str) -> float:
+    """Seconds from starting ``oscsend ADDRESS f 0.5`` to serve's ``unknown address`` reply."""
+    start = time.monotonic()
+    oscsend(port, address, "f", "0.5")
+    line = dump.wait_for("/vibsynth/error", timeout=30.0)
+    assert '"unknown address"' in line, line
+    return time.monotonic() - start
+
+
 def test_pathological_patterns_do_not_freeze_serve(limits_serve):
-    """Patterns that made the regex backtrack for seconds to forever: answered at once, audio keeps running."""
+    """Patterns that made the regex backtrack for seconds to forever: answered at once, audio keeps running.
+
+    Each is compared with the same round trip for a plain unknown address, measured first (oscsend's
+    start-up and the reply path, as slow as the machine is loaded), and the underflows with those
+    while the plain addresses were answered.
+    """
     port, dump, _ = limits_serve
+    _drain(dump)
+    patterns = ["/vibsynth/" + "*" * 28 + "x", "/vibsynth/" + "*" * 245 + "x", "/vibsynth/" + "*a" * 40 + "x"]
+    first = _dump_status(port, dump)
+    plain = [_error_reply_s(port, dump, "/vibsynth/nothing") for _ in patterns]
     before = _dump_status(port, dump)
-    times = []
-    for pattern in ["/vibsynth/" + "*" * 28 + "x", "/vibsynth/" + "*" * 245 + "x", "/vibsynth/" + "*a" * 40 + "x"]:
-        start = time.monotonic()
-        oscsend(port, pattern, "f", "0.5")
-        line = dump.wait_for("/vibsynth/error", timeout=5.0)
-        times.append(time.monotonic() - start)
-        assert '"unknown address"' in line
+    times = [_error_reply_s(port, dump, pattern) for pattern in patterns]
     start = time.monotonic()
     oscsend(port, "/vibsynth/get", "s", "intensity")
-    dump.wait_for("/vibsynth/intensity", timeout=5.0)
+    dump.wait_for("/vibsynth/intensity", timeout=30.0)
     get_s = time.monotonic() - start
     after = _dump_status(port, dump)
     rate = float(after["rate"])
+    baseline = int(before["underflows"]) - int(first["underflows"])
+    loaded = int(after["underflows"]) - int(before["underflows"])
     print(
         "\npathological pattern -> error reply (incl. oscsend start-up): "
-        f"{', '.join(f'{1e3 * t:.0f} ms' for t in times)}; "
-        f"then /get {1e3 * get_s:.0f} ms; underflows {int(after['underflows']) - int(before['underflows'])}; "
+        f"{', '.join(f'{1e3 * t:.0f} ms' for t in times)} "
+        f"(plain address: {', '.join(f'{1e3 * t:.0f} ms' for t in plain)}); "
+        f"then /get {1e3 * get_s:.0f} ms; underflows {loaded} (plain addresses: {baseline}); "
         f"stream advanced {(int(after['frame']) - int(before['frame'])) / rate:.2f} s"
     )
-    assert max(times) < 2.0 and get_s < 2.0
+    # a backtracking match takes seconds to forever; a loaded machine slows the plain round trip as much
+    bound = 2.0 + 2 * max(plain)
+    assert max(times) < bound and get_s < bound
     assert int(after["frame"]) > int(before["frame"])  # the audio stream kept going
-    assert int(after["underflows"]) - int(before["underflows"]) <= MAX_UNDERFLOWS
+    assert loaded <= baseline + MAX_UNDERFLOWS
 
 
 def test_cidr_allow_list_starts_serve(limits_serve):

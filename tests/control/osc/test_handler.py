@@ -560,21 +560,39 @@ def test_nested_bundle_timetags(handler, ctl, peer):
     assert first.at_frame is None and second.at_frame > ctl.engine.frame
 
 
-def test_stream_clock_keeps_least_late_offset():
-    class Eng:
-        fs = 1000.0
-        frame_position = 0
+class _Stream:
+    """An engine's stream position (``frame_position``) at 1 kHz and the wall clock, both set by a test."""
 
-    wall = [10.0]
-    eng = Eng()
-    clock = StreamClock(eng, wall=lambda: wall[0])
-    eng.frame_position, wall[0] = 1000, 11.0  # exact
-    clock.sample()
-    eng.frame_position, wall[0] = 1000, 11.09  # block not yet rendered: looks late
-    frame, current = clock.frame_at(12.0)
+    fs = 1000.0
+
+    def __init__(self) -> None:
+        self.frame_position, self.wall = 0, 10.0
+        self.clock = StreamClock(self, wall=lambda: self.wall)
+
+    def at(self, frame: int, wall: float) -> StreamClock:
+        self.frame_position, self.wall = frame, wall
+        return self.clock
+
+
+def test_stream_clock_keeps_least_late_offset():
+    stream = _Stream()
+    stream.at(1000, 11.0).sample()  # exact
+    frame, current = stream.at(1000, 11.09).frame_at(12.0)  # block not yet rendered: looks late
     assert frame == pytest.approx(2000, abs=1) and current == 1000
-    eng.frame_position, wall[0] = 0, 20.0  # the stream restarted
-    assert clock.frame_at(21.0)[0] == pytest.approx(1000, abs=1)
+    assert stream.at(0, 20.0).frame_at(21.0)[0] == pytest.approx(1000, abs=1)  # the stream restarted
+
+
+def test_stream_clock_forgets_samples_taken_before_the_stream_started():
+    """Packets that arrive before the first block (a slow stream start) must not make timetags late.
+
+    Frame 0 plays when the stream starts, not when the packet came: such a sample's offset is too
+    large by the wait, and the least-late rule kept it (e2e: every timetag 0.1-0.3 s late).
+    """
+    stream = _Stream()
+    stream.at(0, 10.0).sample()  # serve answers OSC; its stream starts 0.1 s later (less than a restart's jump)
+    stream.at(0, 10.05).sample()
+    assert stream.at(200, 10.3).frame_at(11.1)[0] == pytest.approx(1000, abs=1)  # frame 0 played at 10.1
+    assert stream.at(300, 10.4).frame_at(11.4)[0] == pytest.approx(1300, abs=1)
 
 
 # ---------------------------------------------------------------------- adapter contract

@@ -19,8 +19,9 @@ class StreamClock:
     (it may be taken later in the cycle); the estimate keeps the largest (least late) offset
     seen, decaying slowly (``drift`` s/s, 1000 ppm: more than sound cards and JACK's dummy
     driver drift) so that the drift between the audio clock and
-    the system clock is followed, and resets when the stream jumps (restart). The OSC
-    handler samples it with every batch of packets it receives.
+    the system clock is followed, and resets when the stream jumps (restart). A sample taken
+    before the stream has rendered its first block only stands in until the stream runs. The
+    OSC handler samples it with every batch of packets it receives.
     """
 
     def __init__(
@@ -32,6 +33,7 @@ class StreamClock:
         self.reset_s = reset_s
         self.wall = wall
         self._offset: float | None = None
+        self._provisional = False
         self._last_wall = 0.0
 
     def sample(self) -> tuple[int, float]:
@@ -40,8 +42,15 @@ class StreamClock:
         now = self.wall()
         offset = (frame - self.lead_frames) / float(self.engine.fs) - now
         est = self._offset
-        if est is None:
-            est = offset
+        if frame <= 0:
+            # No block rendered yet (the stream has not started, or has just restarted): frame 0
+            # plays when the stream starts, not now, so this offset is too large by the wait. It is
+            # the best guess until a sample of the running stream replaces it, never kept as the
+            # largest: that put every timetag late by the wait (0.1-0.3 s after a slow start),
+            # for minutes at the drift's pace.
+            est, self._provisional = offset, True
+        elif est is None or self._provisional:
+            est, self._provisional = offset, False
         else:
             est -= self.drift * max(0.0, now - self._last_wall)
             if offset > est or offset < est - self.reset_s:
