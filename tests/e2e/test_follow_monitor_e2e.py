@@ -39,7 +39,7 @@ def capture_band_db(ports: list[str], seconds: float = 1.0) -> float:
         return band_db(cap.data[:, 0])
 
 
-def wait_status(served: Served, ok, timeout: float = 5.0) -> dict:
+def wait_status(served: Served, ok, timeout: float = 15.0) -> dict:
     """serve's /status once ``ok(status)`` holds (or as it is after ``timeout``)."""
     deadline = time.monotonic() + timeout
     while True:
@@ -54,7 +54,7 @@ def test_serve_follow_monitor_follows_what_plays_into_the_system_playback_ports(
     try:
         assert len(served.in_ports) == 2, served.in_ports
         status = wait_status(served, lambda s: "follow.device" in s)  # ports first, then the follower attaches
-        assert status["follow.device"].startswith("monitor (JACK"), status["follow.device"]
+        assert status.get("follow.device", "").startswith("monitor (JACK"), status
         quiet_level = status["follow.level_db"]
         quiet_out = capture_band_db(served.out_ports)
         n = int(8 * FS)
@@ -71,7 +71,7 @@ def test_serve_follow_monitor_follows_what_plays_into_the_system_playback_ports(
         )
         assert "vibsynth-desktop" in feeds  # the player feeding the speakers is what serve follows
         assert not any(o in feeds for o in served.out_ports)  # serve's own outputs are not followed
-        assert status["follow.level_db"] == pytest.approx(TONE_DB, abs=3.0)
+        assert status["follow.level_db"] == pytest.approx(TONE_DB, abs=3.0), status
         assert quiet_level < TONE_DB - 30
         assert loud_out > quiet_out + 30.0
         assert loud_out == pytest.approx(TONE_DB, abs=3.0)  # vibration mode, gain 0: the input's band level
