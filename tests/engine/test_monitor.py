@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from types import SimpleNamespace
 
@@ -42,6 +43,72 @@ def test_no_monitor_anywhere_is_one_message_naming_what_was_tried(monkeypatch):
     assert message.startswith("no loopback/monitor input on this system; tried JACK: PortAudio has no JACK host API")
     assert "PulseAudio/PipeWire: PortAudio lists no 'pulse' or 'pipewire' input device" in message
     assert "WASAPI loopback: PortAudio lists no WASAPI [Loopback] input device" in message
+
+
+class FakeDeviceInput:
+    """What MonitorInput opens: records its spec and host API; ``fail`` makes open() refuse."""
+
+    made: list[tuple[str, object]] = []
+    fail = ""
+
+    def __init__(self, spec, *, fs, host_api, block_size):
+        self.spec, self.host_api = spec, host_api
+        FakeDeviceInput.made.append((spec, host_api))
+
+    def open(self):
+        if FakeDeviceInput.fail:
+            raise DeviceError(FakeDeviceInput.fail)
+
+    def status(self):
+        return {"device": f"device {self.spec}", "state": "open", "reason": ""}
+
+
+@pytest.fixture
+def fake_devices(monkeypatch):
+    monkeypatch.delenv("PULSE_SOURCE", raising=False)
+    FakeDeviceInput.made, FakeDeviceInput.fail = [], ""
+
+    def use(apis, devices):
+        monkeypatch.setattr(monitor, "import_sounddevice", lambda: FakeSoundDevice(apis, devices))
+
+    return use
+
+
+def test_on_pulseaudio_or_pipewire_the_monitor_is_the_default_outputs_monitor(fake_devices, monkeypatch):
+    fake_devices(
+        [{"name": "ALSA"}],
+        [
+            {"name": "HDA Intel: ALC (hw:0,0)", "hostapi": 0, "max_input_channels": 2},
+            {"name": "pipewire", "hostapi": 0, "max_input_channels": 64},
+            {"name": "pulse", "hostapi": 0, "max_input_channels": 32},
+        ],
+    )
+    source = MonitorInput(fs=48000.0, device_input=FakeDeviceInput)
+    source.open()
+    assert FakeDeviceInput.made == [("1:1,2", None)] and source.path == "PulseAudio/PipeWire"
+    assert os.environ["PULSE_SOURCE"] == "@DEFAULT_MONITOR@"
+    assert source.status()["device"] == "monitor (PulseAudio/PipeWire: device 1:1,2)"
+
+
+def test_on_windows_the_first_wasapi_loopback_device_is_taken(fake_devices):
+    fake_devices(
+        [{"name": "MME"}, {"name": "Windows WASAPI"}],
+        [
+            {"name": "Speakers (Realtek) [Loopback]", "hostapi": 0, "max_input_channels": 2},  # MME: not it
+            {"name": "Microphone (Realtek)", "hostapi": 1, "max_input_channels": 2},
+            {"name": "Speakers (Realtek) [Loopback]", "hostapi": 1, "max_input_channels": 2},
+        ],
+    )
+    source = MonitorInput(fs=48000.0, device_input=FakeDeviceInput)
+    source.open()
+    assert FakeDeviceInput.made == [("2:1,2", "WASAPI")] and source.path == "WASAPI loopback"
+
+
+def test_a_path_whose_device_refuses_to_open_is_named_with_its_reason(fake_devices):
+    fake_devices([{"name": "ALSA"}], [{"name": "pulse", "hostapi": 0, "max_input_channels": 32}])
+    FakeDeviceInput.fail = "cannot open input 'pulse' at 48000 Hz: Device unavailable"
+    with pytest.raises(DeviceError, match="PulseAudio/PipeWire: cannot open input 'pulse' at 48000 Hz"):
+        MonitorInput(fs=48000.0, device_input=FakeDeviceInput).open()
 
 
 def test_without_the_jack_package_the_message_says_how_to_get_it(monkeypatch):

@@ -252,12 +252,15 @@ class MonitorInput:
         self.inner, self.patcher = inner, patchbay
 
     def _open_pulse(self, sd: ModuleType) -> None:
-        names = [str(d["name"]) for d in sd.query_devices() if int(d.get("max_input_channels", 0)) > 0]
-        device = next((n for n in names if n.lower() in _PULSE_DEVICES), None)
-        if device is None:
+        found = [
+            i
+            for i, d in enumerate(sd.query_devices())
+            if str(d["name"]).lower() in _PULSE_DEVICES and int(d.get("max_input_channels", 0)) > 0
+        ]
+        if not found:
             raise DeviceError("PortAudio lists no 'pulse' or 'pipewire' input device")
         os.environ.setdefault("PULSE_SOURCE", "@DEFAULT_MONITOR@")  # libpulse's default source: the monitor
-        inner = self._inner(device, None)
+        inner = self._inner(str(found[0]), None)  # by index: a name substring may match several
         inner.open()
         self.inner = inner
 
