@@ -6,6 +6,7 @@ the Python client. Skips without mono (tests/clients/mono.py).
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +42,12 @@ def served(tmp_path_factory, follow_check):
     proc, port = start_serve(tmp, extra_config=config)
     try:
         with vibsynth.Client(port=port, timeout=5.0) as client:
+            # serve answers OSC before its follower runs (it opens the input after): until then every
+            # follow message is answered "follow is not running"
+            deadline = time.monotonic() + 30.0
+            while "follow.device" not in client.status():
+                assert time.monotonic() < deadline, "serve's follower did not start"
+                time.sleep(0.05)
             yield port, client
     finally:
         stop_serve(proc)
