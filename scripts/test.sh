@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set everything up, then run the whole test suite: unit tests, and end-to-end tests on a
 # private JACK dummy server (real PortAudio stream, JACK MIDI, liblo's oscsend/oscdump).
-# Extra args go to pytest.
+# Extra args go to pytest (one serial run of what they select).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh --test
@@ -12,4 +12,15 @@ export PYTHONDONTWRITEBYTECODE=1
 .venv/bin/ruff check vibsynth tests benchmarks scripts
 .venv/bin/ruff format --check --quiet vibsynth tests benchmarks scripts
 .venv/bin/mypy
-exec scripts/with_jack.sh -- .venv/bin/python -m pytest -q -ra "$@"
+if [ $# -gt 0 ]; then
+  exec scripts/with_jack.sh -- .venv/bin/python -m pytest -q -ra "$@"
+fi
+# The unit tests on two workers (pytest-xdist; a test file's tests stay on one worker: module
+# fixtures and the docs runner's pages are made once; no two files share a file or a port),
+# then the end-to-end tests one at a time: they measure real-time behaviour against a quiet
+# baseline, so nothing else may load the machine. Both run to the end; either failing fails.
+exec scripts/with_jack.sh -- bash -c '
+  status=0
+  .venv/bin/python -m pytest -q -ra -n 2 --dist loadfile tests --ignore=tests/e2e || status=$?
+  .venv/bin/python -m pytest -q -ra tests/e2e || status=$?
+  exit $status'

@@ -219,6 +219,7 @@ class Page:
 
     rel: str
     root: Path
+    banks: Path | None = None  # a bank cache shared by the pages (their XDG_CACHE_HOME links to it)
     ports: dict[int, int] = field(default_factory=dict)
     server: subprocess.Popen | None = None
     server_args: tuple[str, ...] | None = None
@@ -228,6 +229,12 @@ class Page:
         self.work = self.root / "work"
         for folder in ("work", "home", "config", "data", "cache", "state", "runtime"):
             (self.root / folder).mkdir(parents=True, exist_ok=True)
+        if self.banks is not None:
+            # The noise bank a page's commands build (keyed by its settings) is the same on every page:
+            # built once for the session, not once a page. Nothing else of the cache is shared.
+            self.banks.mkdir(parents=True, exist_ok=True)
+            (self.root / "cache" / "vibsynth").mkdir(exist_ok=True)
+            (self.root / "cache" / "vibsynth" / "banks").symlink_to(self.banks, target_is_directory=True)
         os.chmod(self.root / "runtime", 0o700)
         # README's commands say .venv/bin/vibsynth, as typed in a checkout
         (self.work / ".venv").symlink_to(VENV_BIN.parent, target_is_directory=True)
@@ -317,7 +324,7 @@ class Pages:
     def get(self, block: Block) -> Page:
         with self.lock:
             if block.rel not in self.pages:
-                self.pages[block.rel] = Page(block.rel, self.tmp / re.sub(r"\W", "_", block.rel))
+                self.pages[block.rel] = Page(block.rel, self.tmp / re.sub(r"\W", "_", block.rel), self.tmp / "banks")
             return self.pages[block.rel]
 
     def start(self, blocks: list[Block]) -> None:
