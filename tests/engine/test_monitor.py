@@ -65,7 +65,8 @@ class FakeDeviceInput:
 
 @pytest.fixture
 def fake_devices(monkeypatch):
-    monkeypatch.delenv("PULSE_SOURCE", raising=False)
+    monkeypatch.setenv("PULSE_SOURCE", "")  # recorded, so the value the monitor path sets is undone after the test
+    monkeypatch.delenv("PULSE_SOURCE")
     FakeDeviceInput.made, FakeDeviceInput.fail = [], ""
 
     def use(apis, devices):
