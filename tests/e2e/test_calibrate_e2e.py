@@ -44,6 +44,10 @@ def response_db(sos: np.ndarray, freqs: np.ndarray, fs: float) -> np.ndarray:
     return 20 * np.log10(np.abs(h))
 
 
+#: Cycles the simulated actuator's callback runs before it says it is ready (0.1 s at 48 kHz, 128 frames).
+WARM_CYCLES = 40
+
+
 def run_simulated_actuator(name: str, sos: np.ndarray, noise_rms: float, seed: int) -> None:
     """The simulated actuator's process: a JACK client ``name`` (``in`` -> response + noise -> ``out``).
 
@@ -59,12 +63,16 @@ def run_simulated_actuator(name: str, sos: np.ndarray, noise_rms: float, seed: i
     outport = client.outports.register("out")
     zi = np.zeros((sos.shape[0], 2))
     noise = (noise_rms * np.random.default_rng(seed).standard_normal(1 << 18)).astype(np.float32)
-    state: dict = {"pos": 0, "gaps": 0, "next": None, "rec": None, "at": 0}
+    state: dict = {"pos": 0, "gaps": 0, "next": None, "rec": None, "at": 0, "cycles": 0}
     full = threading.Event()  # the main thread waits without the GIL while the callback records
+    warm = threading.Event()
 
     def process(frames: int) -> None:
         nonlocal zi
         now = client.last_frame_time
+        state["cycles"] += 1
+        if state["cycles"] == WARM_CYCLES:
+            warm.set()
         if state["next"] is not None and now != state["next"]:
             state["gaps"] += 1  # a cycle this Python client missed: a hole in the instrument
         state["next"] = now + frames
@@ -85,6 +93,10 @@ def run_simulated_actuator(name: str, sos: np.ndarray, noise_rms: float, seed: i
 
     client.set_process_callback(process)
     client.activate()
+    # Ready once the callback runs in the graph, its first (slow) calls behind it: a measurement
+    # started at once could meet those first cycles.
+    if not warm.wait(10.0):
+        raise SystemExit("the simulated actuator's process callback did not run")
     print("ready", flush=True)
     for line in sys.stdin:
         _, frames, path = line.split()
@@ -106,7 +118,8 @@ class SimulatedActuator:
 
     ``PortAudio:out_<channel>`` -> the actuator -> the ``input_index``-th PortAudio input port
     (0: none, the actuator's ``out`` is captured by the test), connected by a patch-bay client
-    of this process as soon as the ports appear.
+    of this process as soon as the ports appear: those of a PortAudio client made after the
+    actuator (the measuring process'), never those that existed before it.
     """
 
     _count = 0
@@ -132,6 +145,10 @@ class SimulatedActuator:
         )
         self.fs = float(self.patch.samplerate)
         self.channel, self.input_index = channel, input_index
+        # PortAudio ports of other processes that exist now (a serve of an earlier test still
+        # closing, this test process' own PortAudio client): never patched. By identity, not name:
+        # the measuring process' client may get a name that one of them held.
+        self._stale = {p.uuid for p in self.patch.get_ports("PortAudio", is_audio=True)}
         self._stop = threading.Event()
         self._watch = threading.Thread(target=self._connect_loop, daemon=True)
         self._watch.start()
@@ -145,8 +162,9 @@ class SimulatedActuator:
 
         while not self._stop.is_set():
             try:
-                outs = sorted((p.name for p in client.get_ports("PortAudio", is_audio=True, is_output=True)), key=order)
-                ins = sorted((p.name for p in client.get_ports("PortAudio", is_audio=True, is_input=True)), key=order)
+                ports = [p for p in client.get_ports("PortAudio", is_audio=True) if p.uuid not in self._stale]
+                outs = sorted((p.name for p in ports if p.is_output), key=order)
+                ins = sorted((p.name for p in ports if p.is_input), key=order)
                 want = None
                 if len(outs) >= self.channel and len(ins) >= self.input_index:
                     want = (outs[self.channel - 1], ins[self.input_index - 1] if self.input_index else "")
