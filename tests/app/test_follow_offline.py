@@ -191,7 +191,7 @@ def test_silence_says_so_and_plays_silence(tmp_path, settings):
         (lambda p: _write(p, np.zeros(1)), "1 sample (0.021 ms) is too short to follow"),
         (lambda p: _write(p, np.r_[np.zeros(FS), np.nan, np.zeros(10)]), "NaN or infinite sample at 1.000 s"),
         (lambda p: p.write_bytes(b"RIFF\x00\x00\x00\x00WAVEjunkjunk"), "not a readable WAV file"),
-        (lambda p: p.write_bytes(b"not a wav at all"), "not a WAV file"),
+        (lambda p: p.write_bytes(b"not a wav at all"), "not a sound file vibsynth reads"),
     ],
 )
 def test_bad_input_is_one_line(tmp_path, settings, make, message):

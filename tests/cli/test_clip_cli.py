@@ -195,6 +195,25 @@ def test_from_audio_writes_a_named_clip_a_file_and_refuses_to_overwrite(tmp_path
     assert code == 0 and len(load_clip(tmp_path / "g.yaml").keyframes) <= 3 and "budget ran out" in out
 
 
+def test_from_audio_takes_a_real_ogg_from_the_desktop_sound_theme(tmp_path, capsys, isolated):
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    oga = Path("/usr/share/sounds/freedesktop/stereo/complete.oga")
+    if not oga.exists() or shutil.which("oggdec") is None:
+        pytest.skip("sound-theme-freedesktop / vorbis-tools are not installed (scripts/setup.sh --test)")
+    wav = tmp_path / "complete.wav"  # vorbis-tools' decode of the same file, for comparison
+    subprocess.run(["oggdec", "-Q", "-o", str(wav), str(oga)], check=True, capture_output=True, timeout=60)
+    code, out, err = run(capsys, "clip", "from-audio", str(oga), "-o", str(tmp_path / "o.yaml"), "--mode", "audio")
+    assert code == 0 and err == "" and "1.09 s" in out
+    code, _, _ = run(capsys, "clip", "from-audio", str(wav), "-o", str(tmp_path / "w.yaml"), "--mode", "audio")
+    from_ogg, from_wav = load_clip(tmp_path / "o.yaml"), load_clip(tmp_path / "w.yaml")
+    assert code == 0 and from_ogg.duration_ms == pytest.approx(from_wav.duration_ms)
+    assert [round(t.t_ms) for t in from_ogg.transients] == [round(t.t_ms) for t in from_wav.transients]
+    assert len(from_ogg.transients) >= 1  # the chime's strike
+
+
 def test_from_audio_bad_files_write_nothing(tmp_path, capsys, isolated):
     from scipy.io import wavfile
 

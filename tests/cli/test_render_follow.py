@@ -64,6 +64,25 @@ def test_render_follow_a_folder_and_bad_files(tmp_path, capsys):
     assert read_recording(tmp_path / "tracks" / "b.wav").samples.size == 2 * FS
 
 
+def test_render_follow_takes_flac_and_ogg_like_the_same_wav(tmp_path, capsys):
+    import soundfile
+
+    (tmp_path / "snd").mkdir()
+    x = _steps(tmp_path / "snd" / "a.wav", seed=3)
+    soundfile.write(tmp_path / "snd" / "b.flac", x, FS, subtype="PCM_24")  # lossless: the same track
+    soundfile.write(tmp_path / "snd" / "c.ogg", x, FS, format="OGG", subtype="VORBIS")
+    (tmp_path / "snd" / "notes.txt").write_text("not a sound")  # not a sound file's name: not picked
+    code = main(["render", "--follow", "snd", "-o", "tracks", "--jobs", "1"])
+    out, err = capsys.readouterr()
+    assert code == 0 and err == "" and "3 of 3 files converted" in out
+    a, b, c = (read_recording(tmp_path / "tracks" / f"{n}.wav").samples for n in "abc")
+    assert b.size == c.size == a.size == x.size
+    assert np.max(np.abs(a - b)) < 1e-4  # 24-bit rounding of the input is all that differs
+    for lo, hi in ((0.2, 0.9), (1.1, 1.9)):  # Vorbis changes the noise's fine detail, not its level
+        s = slice(int(lo * FS), int(hi * FS))
+        assert intensity_level_db(c[s], fs=FS) == pytest.approx(intensity_level_db(a[s], fs=FS), abs=0.5)
+
+
 def test_render_follow_failures_are_one_line_and_write_nothing(tmp_path, capsys):
     x = np.zeros(FS, np.float32)
     x[100] = np.inf

@@ -351,6 +351,24 @@ def test_file_input_takes_8_channels_at_192k(tmp_path):
     np.testing.assert_allclose(got, ref, atol=1e-6)
 
 
+def test_file_input_plays_a_flac_like_the_wav_it_holds(tmp_path):
+    import soundfile
+
+    rng = np.random.default_rng(13)
+    x = np.round(rng.uniform(-0.5, 0.5, (9600, 2)) * 2**15) / 2**15  # 16-bit values: FLAC keeps them exactly
+    path = tmp_path / "scan.flac"
+    soundfile.write(path, x, 96000, subtype="PCM_16")
+    clock = FrameClock()
+    inp = open_input(str(path), fs=48000.0, frame_clock=clock)
+    assert isinstance(inp, FileInput) and inp.file_fs == 96000 and inp.ring.channels == 2
+    inp.open()
+    try:
+        got = drain(inp, clock, 4800)
+    finally:
+        inp.close()
+    np.testing.assert_allclose(got, resample_poly(x, 1, 2, axis=0), atol=1e-6)
+
+
 def test_bad_files_and_channels_are_one_clear_error(tmp_path):
     path = tmp_path / "stereo.wav"
     write_wav(path, 48000, np.zeros((100, 2)))
@@ -358,8 +376,10 @@ def test_bad_files_and_channels_are_one_clear_error(tmp_path):
         FileInput(path, fs=48000.0, frame_clock=FrameClock(), channels=[3])
     junk = tmp_path / "junk.wav"
     junk.write_bytes(b"not a wav at all")
-    with pytest.raises(InputError, match="not a WAV file"):
+    with pytest.raises(InputError, match="junk.wav: not a sound file vibsynth reads"):
         FileInput(junk, fs=48000.0, frame_clock=FrameClock())
+    with pytest.raises(InputError, match="gone.flac: cannot read"):  # named like a sound file: not a device
+        open_input(str(tmp_path / "gone.flac"), fs=48000.0, frame_clock=FrameClock())
     assert isinstance(open_input(str(path), fs=48000.0, frame_clock=FrameClock()), FileInput)
     assert isinstance(open_input("system:1", fs=48000.0, frame_clock=FrameClock()), SoundDeviceInput)
 

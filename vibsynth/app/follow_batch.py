@@ -261,7 +261,10 @@ def _run_dask(jobs: Sequence[FollowJob], address: str, done: Callable[[int, JobO
 
 
 def sound_files(folder: Path) -> Iterable[Path]:
-    """The WAV files under a folder, sorted (sub-folders walked)."""
+    """The sound files under a folder (by name: :data:`~vibsynth.formats.sound_reader.SOUND_SUFFIXES`), sorted
+    (sub-folders walked)."""
+    from vibsynth.formats.sound_reader import SOUND_SUFFIXES
+
     for path in sorted(folder.rglob("*")):
-        if path.is_file() and path.suffix.lower() == ".wav":
+        if path.is_file() and path.suffix.lower() in SOUND_SUFFIXES:
             yield path

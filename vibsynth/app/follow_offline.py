@@ -3,7 +3,7 @@
 One pipeline for every offline use of the tracker (``vibsynth clip from-audio``, ``vibsynth
 render --follow``, a folder of either)::
 
-    WavReader blocks (any channels, any rate)  ->  Tracker.process (channels mixed to their mean,
+    sound file blocks (any channels, any rate)  ->  Tracker.process (channels mixed to their mean,
     decimated inside)  ->  frames aligned to the input  ->  a clip (simplified)  |  engine cues
 
 * **The same tracker as live**, with the mode's documented defaults framed every
@@ -29,7 +29,7 @@ render --follow``, a folder of either)::
   ``tolerance_balance`` (knob units); the error reached is stated in the result, the clip's
   description and the file's header.
 * **Bad input**: one :class:`~vibsynth.errors.InputError` line each (see
-  :class:`~vibsynth.formats.wav_reader.WavReader`; also a file shorter than
+  :func:`~vibsynth.formats.sound_reader.open_sound`; also a file shorter than
   :data:`MIN_SECONDS`, and a clip longer than a clip holds). Silence is not an error: the
   result says so (``silent``) and plays silence.
 """
@@ -55,7 +55,7 @@ from vibsynth.dsp.follow.tracker import Tracker
 from vibsynth.dsp.simplify import simplify
 from vibsynth.engine.commands import SetKnob
 from vibsynth.errors import InputError, ParameterError
-from vibsynth.formats.wav_reader import WavReader
+from vibsynth.formats.sound_reader import open_sound
 from vibsynth.settings.clips import Clip, Keyframe, Transient, clip_from_data
 from vibsynth.settings.models_clip import MAX_DURATION_MS, MAX_KEYFRAMES, MAX_TRANSIENTS
 from vibsynth.settings.models_config import VibsynthConfig
@@ -181,7 +181,8 @@ class FollowStream:
     Parameters
     ----------
     path : path-like
-        A WAV file (any channels, mixed to their mean; PCM or float; 1 kHz to 768 kHz).
+        A sound file: WAV (PCM or float), FLAC, Ogg Vorbis/Opus, MP3, AIFF... (any channels, mixed
+        to their mean; 1 kHz to 768 kHz).
     settings : VibsynthConfig
         The engine's knob mapping (``knobs.ceiling_db``, ``range_db``, balance range).
     params : TrackerParams, optional
@@ -221,7 +222,7 @@ class FollowStream:
     ) -> None:
         self.path = Path(path)
         self.params = params if params is not None else offline_params(mode, focus)
-        self.reader = WavReader(self.path)
+        self.reader = open_sound(self.path)
         try:
             self.fs, self.frames, self.channels = self.reader.fs, self.reader.frames, self.reader.channels
             if self.frames < MIN_SECONDS * self.fs:

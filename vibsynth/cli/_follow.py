@@ -1,6 +1,7 @@
 """Follow offline on the command line: ``clip from-audio`` and ``render --follow``, one file or a folder.
 
-Both commands take a WAV file or a folder of them. One file runs here with a progress bar; a
+Both commands take a sound file (WAV, FLAC, Ogg, MP3...: :mod:`vibsynth.formats.sound_reader`) or a
+folder of them. One file runs here with a progress bar; a
 folder runs ``--jobs`` files at a time on the local cores (default: all of them), or on a Dask
 cluster with ``--dask ADDRESS``. Each file's result is one line (``wrote ...`` on stdout, or
 ``vibsynth: error: ...`` on stderr) and the rest of the folder goes on; the exit code is 1 when
@@ -22,6 +23,7 @@ from vibsynth.cli._inputs import MAX_FILES
 from vibsynth.cli._progress import RenderProgress, add_quiet_argument
 from vibsynth.dsp.follow.params import FOCUSES, MODES
 from vibsynth.errors import InputError, ParameterError
+from vibsynth.formats.sound_reader import READABLE
 from vibsynth.settings.models_clip import MAX_KEYFRAMES
 from vibsynth.settings.models_config import VibsynthConfig
 
@@ -60,10 +62,11 @@ def add_from_audio_parser(sub: Any, add_config_arguments: Any) -> None:
     p = sub.add_parser(
         "from-audio",
         help="make a clip from a sound or vibration recording (the Follow tracker, offline)",
-        description="Track a WAV file (any channels, mixed; any rate) as Follow does live and write a clip: "
+        description="Track a sound file (WAV, FLAC, Ogg, MP3, AIFF...; any channels, mixed; any rate) as Follow "
+        "does live and write a clip: "
         "keyframes of intensity and balance, simplified to at most --max-keyframes within the tolerances "
         "(the error reached is printed and kept in the clip), and onsets as transients, aligned to the input. "
-        "A folder converts every WAV under it into -o FOLDER, in parallel (docs/clips.md, docs/follow.md).",
+        "A folder converts every sound file under it into -o FOLDER, in parallel (docs/clips.md, docs/follow.md).",
     )
     add_config_arguments(p)
     p.add_argument("input", type=Path, metavar="IN.wav|FOLDER")
@@ -108,9 +111,9 @@ def _inputs(path: Path) -> list[Path]:
         for f in sound_files(path):
             found.append(f)
             if len(found) > MAX_FILES:
-                raise InputError(f"{path}: more than {MAX_FILES:,} WAV files; name a smaller folder")
+                raise InputError(f"{path}: more than {MAX_FILES:,} sound files; name a smaller folder")
         if not found:
-            raise InputError(f"{path}: no WAV files in this folder")
+            raise InputError(f"{path}: no sound files in this folder ({READABLE})")
         return found
     if not path.exists():
         raise InputError(f"{path}: no such file or folder")
@@ -198,9 +201,9 @@ def _execute(args: argparse.Namespace, jobs: list[FollowJob], label: str) -> int
 
     workers = args.jobs or default_workers()
     if len(jobs) == 1 and args.dask is None:
-        from vibsynth.formats.wav_reader import WavReader
+        from vibsynth.formats.sound_reader import open_sound
 
-        with WavReader(jobs[0].source) as r:  # the bar counts seconds of input
+        with open_sound(jobs[0].source) as r:  # the bar counts seconds of input
             frames, fs = r.frames, r.fs
         with RenderProgress(label, frames, fs, quiet=quiet) as bar:
             outcomes = run_jobs(jobs, workers=1, on_outcome=report, progress=bar)

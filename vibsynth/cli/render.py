@@ -80,7 +80,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--clip", metavar="NAME|FILE.yaml", help="haptic clip to render (see vibsynth clip list), or a clip file"
     )
     source.add_argument(
-        "--follow", metavar="IN.wav|FOLDER", help="render the haptic track of a sound (Follow, offline)"
+        "--follow",
+        metavar="IN.wav|FOLDER",
+        help="render the haptic track of a sound file (WAV, FLAC, Ogg, MP3...) or a folder of them (Follow, offline)",
     )
     p.add_argument("--intensity", type=unit_interval, metavar="I", help="intensity knob 0..1 (with --balance)")
     p.add_argument(

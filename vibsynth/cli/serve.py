@@ -25,7 +25,7 @@ Outputs: auto (PortAudio, else a silent null output with a warning), sounddevice
 (PortAudio; an error if it cannot be opened), null (no sound card), wav (-o FILE
 --seconds N: rendered faster than real time).
 
---follow DEVICE[:CH,...] or --follow FILE.wav follows a sound or vibration live: the
+--follow DEVICE[:CH,...], monitor or FILE (WAV, FLAC, Ogg, MP3...) follows a sound or vibration live: the
 texture tracks its level, brightness and onsets (--follow-mode vibration|audio,
 --follow-focus all|effects|bass|beat; docs/follow.md).
 
@@ -103,8 +103,8 @@ def _add_follow_arguments(p: argparse.ArgumentParser) -> None:
         metavar="DEVICE[:CH,...]|monitor|FILE.wav",
         help="follow this input live: a device (name substring or index, then 1-based inputs; on JACK, "
         "serve's own in_N ports), 'monitor' (what the system plays: JACK playback feeds, a PulseAudio/PipeWire "
-        "monitor, a WASAPI loopback) or a WAV file played in step with the output (default: follow.device "
-        "when follow.enabled)",
+        "monitor, a WASAPI loopback) or a sound file (WAV, FLAC, Ogg, MP3...) played in step with the output "
+        "(default: follow.device when follow.enabled)",
     )
     group.add_argument(
         "--follow-mode", choices=flag_choices("follow.mode"), default=None, help="default follow.mode (vibration)"

@@ -9,7 +9,7 @@ the control layer reads any of them the same way:
   that vanishes is reported (``status()["state"]`` ``lost``, then ``retrying``) and reopened
   when it comes back, in the same PortAudio instance as the output (on JACK, the same JACK
   client: its ``in_N`` ports stand beside the output's ``out_N``).
-* :class:`FileInput`: a WAV file (any channels, any rate, resampled to the engine's rate block
+* :class:`FileInput`: a sound file (WAV, FLAC, Ogg, MP3...; any channels, any rate, resampled to the engine's rate block
   by block, never loaded whole) fed into a ring by a Python thread, paced by the *output*
   clock (the engine's frame position), looping or ending.
 
@@ -357,10 +357,10 @@ class SoundDeviceInput(PortAudioStream):
 
 # ---------------------------------------------------------------------- file
 class FileInput:
-    """A WAV file played into an :class:`InputRing`, paced by the output's frame clock.
+    """A sound file played into an :class:`InputRing`, paced by the output's frame clock.
 
     A Python thread (never the audio thread) reads the file block by block
-    (:class:`~vibsynth.formats.wav_reader.WavReader`), resamples it to ``fs``
+    (:func:`~vibsynth.formats.sound_reader.open_sound`: WAV, FLAC, Ogg, MP3...), resamples it to ``fs``
     (:class:`~vibsynth.dsp.resample_stream.StreamResampler`, equal to ``resample_poly``) and
     writes it into the ring so that ``lead_frames`` more frames are in than output frames
     rendered since :meth:`open`: the file plays in step with the output, whatever the
@@ -369,7 +369,7 @@ class FileInput:
     Parameters
     ----------
     path : path-like
-        A WAV file (1..64 channels, 1 kHz..768 kHz).
+        A sound file (1..64 channels, 1 kHz..768 kHz).
     fs : float
         The engine's rate.
     frame_clock : callable
@@ -398,7 +398,7 @@ class FileInput:
         block_frames: int = 1024,
         seconds: float = 1.0,
     ) -> None:
-        from vibsynth.formats.wav_reader import WavReader
+        from vibsynth.formats.sound_reader import open_sound
 
         self.path = Path(path)
         if not (math.isfinite(fs) and fs > 0):
@@ -406,7 +406,7 @@ class FileInput:
         self._fs = float(fs)
         self.frame_clock = frame_clock
         self.loop = bool(loop)
-        with WavReader(self.path) as reader:  # header checked now: a bad file is one clear error
+        with open_sound(self.path) as reader:  # header checked now: a bad file is one clear error
             self.file_fs, self.file_channels, self.file_frames = reader.fs, reader.channels, reader.frames
         picked = list(channels) if channels else list(range(1, self.file_channels + 1))
         bad = [c for c in picked if int(c) != c or not 1 <= c <= self.file_channels]
@@ -463,12 +463,12 @@ class FileInput:
     def _blocks(self) -> Any:
         """Resampled (frames, channels) float32 blocks of the file, looping if asked."""
         from vibsynth.dsp.resample_stream import StreamResampler
-        from vibsynth.formats.wav_reader import WavReader
+        from vibsynth.formats.sound_reader import open_sound
 
         columns = [c - 1 for c in self.channels]
         resampler = StreamResampler(self.file_fs, self._fs, len(columns))
         while True:
-            with WavReader(self.path) as reader:
+            with open_sound(self.path) as reader:
                 for block in reader.blocks(self.block_frames):
                     out = resampler.process(block[:, columns])
                     if out.shape[0]:
@@ -527,14 +527,16 @@ def open_input(
     loop: bool = False,
     **device_options: Any,
 ) -> InputSource:
-    """A :class:`FileInput` when ``spec`` names a ``.wav`` file, a
+    """A :class:`FileInput` when ``spec`` names a sound file (``.wav``, ``.flac``, ``.ogg``...), a
     :class:`~vibsynth.engine.monitor.MonitorInput` for ``monitor`` (what the system plays), else a
     :class:`SoundDeviceInput` (not opened).
 
     ``device_options`` go to :class:`SoundDeviceInput` (``host_api``, ``block_size``, ...).
     """
     text = str(spec)
-    if text.lower().endswith((".wav", ".wave")) or Path(text).is_file():
+    from vibsynth.formats.sound_reader import SOUND_SUFFIXES
+
+    if text.lower().endswith(SOUND_SUFFIXES) or Path(text).is_file():
         return FileInput(text, fs=fs, frame_clock=frame_clock, loop=loop)
     from vibsynth.engine.monitor import MonitorInput, is_monitor_spec  # it builds on this module
 

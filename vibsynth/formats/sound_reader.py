@@ -25,10 +25,13 @@ from numpy.typing import NDArray
 from vibsynth.errors import InputError
 from vibsynth.formats.wav_reader import MAX_WAV_CHANNELS, MAX_WAV_RATE, MIN_WAV_RATE, WavReader
 
-__all__ = ["SoundReader", "SoundFileReader", "open_sound", "READABLE"]
+__all__ = ["SoundReader", "SoundFileReader", "open_sound", "READABLE", "SOUND_SUFFIXES"]
 
 #: What :func:`open_sound` reads, for messages and docs.
 READABLE = "WAV, FLAC, Ogg Vorbis/Opus (.ogg, .oga, .opus), MP3, AIFF, CAF, W64"
+
+#: File name endings taken as sound files (a folder conversion picks these; a live ``--follow`` path too).
+SOUND_SUFFIXES = (".wav", ".wave", ".flac", ".ogg", ".oga", ".opus", ".mp3", ".aif", ".aiff", ".aifc", ".caf", ".w64")
 
 _WAV_MAGIC = (b"RIFF", b"RF64", b"RIFX")
 

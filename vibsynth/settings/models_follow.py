@@ -6,7 +6,7 @@ once there. docs/follow.md ("Live") explains what each key does. Example::
 
     follow:
       enabled: true
-      device: "system:1,2"      # DEVICE[:CH,...] (1-based inputs), monitor, or a .wav file
+      device: "system:1,2"      # DEVICE[:CH,...] (1-based inputs), monitor, or a sound file
       mode: audio
       focus: effects
       routes:                   # stereo in: input 1 -> actuator 1, input 2 -> actuator 2
@@ -150,8 +150,8 @@ class Follow(Section):
     device: str | None = setting(
         None,
         "DEVICE[:CH,...] (name substring or index, then 1-based inputs), monitor (what the system plays) "
-        "or a .wav file; null = the default input",
-        allowed="a device spec like 'system:1,2' or '3', monitor, a .wav file path, or null",
+        "or a sound file (WAV, FLAC, Ogg, MP3...); null = the default input",
+        allowed="a device spec like 'system:1,2' or '3', monitor, a sound file path, or null",
         max_length=1024,
     )
     mode: _Mode = setting(_DEFAULTS.mode, "vibration: the input is a vibration; audio: program audio")
