@@ -43,6 +43,20 @@ def test_serve_builds_it_for_the_osc_server_and_status_shows_its_counters(osc):
     assert oscquery_of(osc.controller) is None
 
 
+def test_the_libraries_are_nodes_from_the_first_request(osc, tmp_path):
+    from vibsynth.settings.clips import ClipLibrary, shipped_clips_dir
+    from vibsynth.settings.library import PresetLibrary, shipped_presets_dir
+
+    presets = PresetLibrary(shipped_presets_dir(), tmp_path)
+    clips = ClipLibrary(shipped_clips_dir(), tmp_path)
+    service = adapter.create(
+        settings(), SimpleNamespace(oscquery_port=0), osc.controller, osc, presets=presets, clips=clips
+    )
+    paths = set(service.tree.methods)  # before any refresh of the server's own
+    assert {f"/vibsynth/presets/{n}" for n in presets.names()} <= paths
+    assert {f"/vibsynth/clips/{n}" for n in clips.names()} <= paths
+
+
 def test_off_switches_and_explicit_interfaces(osc):
     assert adapter.create(settings(), SimpleNamespace(no_discovery=True), osc.controller, osc) is None
     assert adapter.create(settings(**{"discovery.enabled": False}), None, osc.controller, osc) is None

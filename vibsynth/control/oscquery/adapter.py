@@ -139,6 +139,7 @@ def create(
     tree.register(
         LibraryNodes(handler.prefix, presets, clips, intensity_range=intensity_range, balance_range=balance_range)
     )
+    tree.refresh()  # the library's nodes are in the tree from the first request
     port_flag = getattr(args, "oscquery_port", None)
     osc_host = str(getattr(args, "osc_host", None) or settings.osc.host)
     host_label = "".join(c if c.isalnum() else "-" for c in name).strip("-")[:50]
