@@ -56,7 +56,9 @@ def start_service(channels: int) -> SimpleNamespace:
     from vibsynth.control.osc import adapter as osc_adapter
     from vibsynth.control.oscquery import adapter as oscquery_adapter
     from vibsynth.control.studio import adapter as studio_adapter
+    from vibsynth.settings.clips import ClipLibrary, shipped_clips_dir
     from vibsynth.settings.config import load_config
+    from vibsynth.settings.library import PresetLibrary, shipped_presets_dir
 
     overrides = {"audio.backend": "null", "audio.channels": channels, "osc.port": 0}
     settings = load_config(overrides=overrides, env={}, user_file=False).settings
@@ -66,7 +68,11 @@ def start_service(channels: int) -> SimpleNamespace:
     controller.output = out  # type: ignore[attr-defined]
     osc = osc_adapter.create(settings, None, controller)
     osc.start()
-    query = oscquery_adapter.create(settings, SimpleNamespace(oscquery_port=0), controller, osc)
+    presets = PresetLibrary(shipped_presets_dir(), None)  # serve's libraries: their entries are nodes too
+    clips = ClipLibrary(shipped_clips_dir(), None)
+    query = oscquery_adapter.create(
+        settings, SimpleNamespace(oscquery_port=0), controller, osc, presets=presets, clips=clips
+    )
     query.start()
     args = SimpleNamespace(no_studio=False, studio_port=0, studio_token=None)
     studio = studio_adapter.create(settings, args, controller, None, servers=[osc])
