@@ -281,13 +281,19 @@ def test_open_pages_get_the_trace_pushed(rig, studio):
         async with aiohttp.ClientSession() as session:
             ws = await connect(session, studio)
             rig.feed(tone(FS, 0.5, 10 ** (-50 / 20)))
-            message = await receive_until(ws, lambda m: m.get("type") == "follow" and m.get("trace", {}).get("ch1"))
+
+            def settled(m: dict) -> bool:  # pushes come every 0.1 s: the first may catch the level's attack
+                trace = m.get("trace", {}).get("ch1") if m.get("type") == "follow" else None
+                return bool(trace) and trace[-1][1] > -50.5
+
+            message = await receive_until(ws, settled)
             await ws.close()
             return message
 
     message = run(scenario())
     points = np.array([p[1] for p in message["trace"]["ch1"]])
     assert message["full"] is False and points[-1] == pytest.approx(-50.0, abs=0.5)
+    assert np.all(np.abs(points[len(points) // 2 :] + 50.0) < 1.0)  # the tone's level, held
 
 
 def test_the_limits_are_the_typed_settings_ranges():
