@@ -75,10 +75,18 @@ def _socket_ready(port: int) -> bool:
         probe.close()
 
 
+#: What serve prints once every part (OSC, OSCQuery, Follow, VRChat, studio) has started.
+STARTED_LINE = "make it vibrate with"
+
+
 def start_serve(
     tmp_path: Path, *, output: str = "null", extra_config: str = "", env: dict | None = None, ready=_socket_ready
 ):
-    """Start ``vibsynth serve``; return (process, port) once ``ready(port)`` (default: it answers /ping)."""
+    """Start ``vibsynth serve``; return (process, port) once ``ready(port)`` (default: it answers /ping).
+
+    And once serve printed its last start-up line (``make it vibrate with``): the OSC server answers
+    before OSCQuery, Follow, VRChat and the studio have started (their /status keys come later).
+    """
     port = free_udp_port()
     config = tmp_path / "vibsynth.yaml"
     config.write_text(f"version: 1\nosc:\n  port: {port}\n{extra_config}", encoding="utf-8")
@@ -105,7 +113,7 @@ def start_serve(
         if time.monotonic() > deadline:
             stop_serve(proc)
             raise AssertionError("serve did not answer /ping in time:\n" + (tmp_path / "serve.log").read_text())
-        if ready(port):
+        if ready(port) and STARTED_LINE in (tmp_path / "serve.log").read_text():
             return proc, port
 
 
