@@ -16,11 +16,13 @@ if [ $# -gt 0 ]; then
   exec scripts/with_jack.sh -- .venv/bin/python -m pytest -q -ra "$@"
 fi
 # The unit tests on two workers (pytest-xdist; a test file's tests stay on one worker: module
-# fixtures and the docs runner's pages are made once; no two files share a file or a port),
-# then the end-to-end tests one at a time: they measure real-time behaviour against a quiet
-# baseline, so nothing else may load the machine. Both run to the end; either failing fails.
+# fixtures and the docs runner's pages are made once; no two files share a file or a port), with
+# the end-to-end files that measure no time (PARALLEL_SAFE: browser and client pages on the null
+# output); then the other end-to-end tests (marked serial by tests/e2e/conftest.py) one at a time:
+# they measure real-time behaviour against a quiet baseline, so nothing else may load the machine.
+# Both run to the end; either failing fails.
 exec scripts/with_jack.sh -- bash -c '
   status=0
-  .venv/bin/python -m pytest -q -ra -n 2 --dist loadfile tests --ignore=tests/e2e || status=$?
-  .venv/bin/python -m pytest -q -ra tests/e2e || status=$?
+  .venv/bin/python -m pytest -q -ra -n 2 --dist loadfile -m "not serial" tests || status=$?
+  .venv/bin/python -m pytest -q -ra -m serial tests/e2e || status=$?
   exit $status'

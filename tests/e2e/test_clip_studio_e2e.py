@@ -17,6 +17,9 @@ from tests.e2e.studioutil import Served, by, chromium_or_skip, require_browser, 
 from tests.formats.haptic_samples import SPRING
 from vibsynth.settings.clips import load_clip
 
+#: Runs on the unit tests' workers (tests/e2e/conftest.py): serve on the null output, a browser page; no time measured.
+PARALLEL_SAFE = True
+
 pytestmark = pytest.mark.e2e
 
 

@@ -22,6 +22,9 @@ from tests.clients.mono import build_client_check, build_unity_check, run_mono
 from tests.e2e.oscclient import free_udp_port
 from tests.e2e.test_osc_e2e import start_serve, stop_serve
 
+#: Runs on the unit tests' workers (tests/e2e/conftest.py): serve on the null output, a mono client; no time measured.
+PARALLEL_SAFE = True
+
 pytestmark = pytest.mark.e2e
 
 CHANNELS = 3

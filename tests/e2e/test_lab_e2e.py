@@ -34,6 +34,9 @@ import pytest
 from tests.e2e.studioutil import ROOT, by, chromium_or_skip, require_browser, start_serve, visible, wait
 from tests.research.lab.conftest import HATT_TEXTURES, RATE, hatt_recording
 
+#: Runs on the unit tests' workers (tests/e2e/conftest.py): serve on the null output, a browser page; no time measured.
+PARALLEL_SAFE = True
+
 pytestmark = [pytest.mark.e2e, pytest.mark.shared]
 
 CONFIG = """bank:

@@ -37,6 +37,9 @@ from tests.e2e.test_lab_e2e import (
     vibsynth,
 )
 
+#: Runs on the unit tests' workers (tests/e2e/conftest.py): serve on the null output, a browser page; no time measured.
+PARALLEL_SAFE = True
+
 pytestmark = [pytest.mark.e2e]
 
 CONFIG = """bank:

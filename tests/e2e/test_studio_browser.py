@@ -48,6 +48,9 @@ from tests.e2e.studioutil import (
 from vibsynth.control.studio.spectrum import SpectrumModel
 from vibsynth.settings.presets import load_preset
 
+#: Runs on the unit tests' workers (tests/e2e/conftest.py): serve on the null output, a browser page; no time measured.
+PARALLEL_SAFE = True
+
 pytestmark = pytest.mark.e2e
 
 TOLERANCE = 1e-5  # OSC sends float32
