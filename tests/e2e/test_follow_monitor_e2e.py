@@ -62,7 +62,10 @@ def test_serve_follow_monitor_follows_what_plays_into_the_system_playback_ports(
         with JackPlayer(n_ports=2, signal=np.stack([tone, tone], axis=1), name="vibsynth-desktop") as player:
             player.connect(["system:playback_1", "system:playback_2"])  # a program playing to the speakers
             player.play()
-            status = wait_status(served, lambda s: abs(s["follow.level_db"] - TONE_DB) < 2.0)
+            # the patch bay reports what it connected after its poll (a child process, a line a poll)
+            status = wait_status(
+                served, lambda s: abs(s["follow.level_db"] - TONE_DB) < 2.0 and "vibsynth-desktop" in s["follow.device"]
+            )
             feeds = status["follow.device"]
             loud_out = capture_band_db(served.out_ports)
         print(

@@ -113,14 +113,24 @@ class JackPatcher:
         for name, feeders in wanted.items():
             have = {p.name for p in client.get_all_connections(client.get_port_by_name(name))}
             for feeder in sorted(feeders - have):
-                client.connect(feeder, name)
-                self.connections += 1
+                if _quietly(client.connect, feeder, name):
+                    self.connections += 1
             for stale in sorted(have - feeders):  # PortAudio's own link to system:capture, gone sources
-                client.disconnect(stale, name)
+                _quietly(client.disconnect, stale, name)
         self.sources = sorted(set(sources))
 
     def state(self) -> dict[str, Any]:
         return {"own": list(self.own), "sources": list(self.sources), "connections": self.connections}
+
+
+def _quietly(change: Any, source: str, destination: str) -> bool:
+    """One connect or disconnect; False when JACK refused it (a port that went between the listing and
+    now, a link PortAudio made or removed meanwhile): the next poll looks again, the rest goes on."""
+    try:
+        change(source, destination)
+    except Exception:  # noqa: BLE001 - jack.JackError (the module is imported in the child only)
+        return False
+    return True
 
 
 def _say(message: dict[str, Any]) -> None:
