@@ -14,18 +14,16 @@ reader's: :data:`~vibsynth.formats.wav_reader.MAX_WAV_CHANNELS`...).
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
 from pathlib import Path
-from types import TracebackType
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vibsynth.errors import InputError
-from vibsynth.formats.wav_reader import MAX_WAV_CHANNELS, MAX_WAV_RATE, MIN_WAV_RATE, WavReader
+from vibsynth.formats.wav_reader import MAX_WAV_CHANNELS, MAX_WAV_RATE, MIN_WAV_RATE, BlockReader, WavReader
 
-__all__ = ["SoundReader", "SoundFileReader", "open_sound", "READABLE", "SOUND_SUFFIXES"]
+__all__ = ["SoundFileReader", "open_sound", "READABLE", "SOUND_SUFFIXES"]
 
 #: What :func:`open_sound` reads, for messages and docs.
 READABLE = "WAV, FLAC, Ogg Vorbis/Opus (.ogg, .oga, .opus), MP3, AIFF, CAF, W64"
@@ -36,33 +34,7 @@ SOUND_SUFFIXES = (".wav", ".wave", ".flac", ".ogg", ".oga", ".opus", ".mp3", ".a
 _WAV_MAGIC = (b"RIFF", b"RF64", b"RIFX")
 
 
-class SoundReader(Protocol):
-    """What both readers offer (see :class:`~vibsynth.formats.wav_reader.WavReader`)."""
-
-    path: Path
-    fs: float
-    channels: int
-    frames: int
-    sample_format: str
-    position: int
-
-    @property
-    def seconds(self) -> float: ...
-
-    def read(self, frames: int) -> NDArray[np.float64]: ...
-
-    def blocks(self, frames: int) -> Iterator[NDArray[np.float64]]: ...
-
-    def close(self) -> None: ...
-
-    def __enter__(self) -> SoundReader: ...
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None: ...
-
-
-def open_sound(path: str | os.PathLike[str]) -> SoundReader:
+def open_sound(path: str | os.PathLike[str]) -> BlockReader:
     """A reader for the sound file at ``path``: WAV by its header, anything else through libsndfile.
 
     Raises
@@ -84,7 +56,7 @@ def open_sound(path: str | os.PathLike[str]) -> SoundReader:
     return SoundFileReader(where)
 
 
-class SoundFileReader:
+class SoundFileReader(BlockReader):
     """A sound file decoded by libsndfile, read in blocks of frames.
 
     Parameters
@@ -144,10 +116,6 @@ class SoundFileReader:
         if self.frames <= 0:
             raise self._fail("holds no samples")
 
-    @property
-    def seconds(self) -> float:
-        return self.frames / self.fs
-
     def read(self, frames: int) -> NDArray[np.float64]:
         """The next (at most) ``frames`` frames, shape (n, channels), float64; empty at the end.
 
@@ -175,24 +143,8 @@ class SoundFileReader:
         self.position += x.shape[0]
         return np.ascontiguousarray(x)
 
-    def blocks(self, frames: int) -> Iterator[NDArray[np.float64]]:
-        """Every remaining frame, in blocks of ``frames`` (the last may be shorter)."""
-        while True:
-            block = self.read(frames)
-            if block.shape[0] == 0:
-                return
-            yield block
-
     def close(self) -> None:
         """Close the file. Idempotent."""
         f, self._file = getattr(self, "_file", None), None
         if f is not None:
             f.close()
-
-    def __enter__(self) -> SoundFileReader:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()

@@ -20,14 +20,14 @@ import struct
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
-from typing import BinaryIO
+from typing import BinaryIO, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vibsynth.errors import InputError
 
-__all__ = ["WavReader", "MAX_WAV_CHANNELS", "MAX_WAV_RATE", "MIN_WAV_RATE"]
+__all__ = ["BlockReader", "WavReader", "MAX_WAV_CHANNELS", "MAX_WAV_RATE", "MIN_WAV_RATE"]
 
 #: Most channels taken (a 7.1.4 mix is 12; ambisonics of order 7 is 64).
 MAX_WAV_CHANNELS = 64
@@ -49,7 +49,51 @@ def _size(n: int) -> str:
     return f"{n} bytes"
 
 
-class WavReader:
+_Reader = TypeVar("_Reader", bound="BlockReader")
+
+
+class BlockReader:
+    """What every sound reader shares: ``seconds``, :meth:`blocks` and the context manager.
+
+    A subclass sets ``fs`` and ``frames`` and defines ``read(frames)`` and ``close()``
+    (:class:`WavReader`, :class:`~vibsynth.formats.sound_reader.SoundFileReader`).
+    """
+
+    path: Path
+    fs: float
+    channels: int
+    frames: int
+    sample_format: str
+    position: int
+
+    @property
+    def seconds(self) -> float:
+        return self.frames / self.fs
+
+    def read(self, frames: int) -> NDArray[np.float64]:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def blocks(self, frames: int) -> Iterator[NDArray[np.float64]]:
+        """Every remaining frame, in blocks of ``frames`` (the last may be shorter)."""
+        while True:
+            block = self.read(frames)
+            if block.shape[0] == 0:
+                return
+            yield block
+
+    def __enter__(self: _Reader) -> _Reader:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+class WavReader(BlockReader):
     """Read a WAV file in blocks of frames.
 
     Parameters
@@ -176,10 +220,6 @@ class WavReader:
         self._frame_bytes = int(block_align)
 
     # ------------------------------------------------------------------ samples
-    @property
-    def seconds(self) -> float:
-        return self.frames / self.fs
-
     def _decode(self, raw: bytes) -> NDArray[np.float64]:
         n = len(raw) // self._frame_bytes
         if self._bits == 8:
@@ -223,24 +263,8 @@ class WavReader:
         self.position += n
         return x
 
-    def blocks(self, frames: int) -> Iterator[NDArray[np.float64]]:
-        """Every remaining frame, in blocks of ``frames`` (the last may be shorter)."""
-        while True:
-            block = self.read(frames)
-            if block.shape[0] == 0:
-                return
-            yield block
-
     def close(self) -> None:
         """Close the file. Idempotent."""
         fh, self._fh = self._fh, None
         if fh is not None:
             fh.close()
-
-    def __enter__(self) -> WavReader:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
