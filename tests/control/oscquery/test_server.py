@@ -99,7 +99,11 @@ def test_listen_streams_values_from_any_side_and_ignore_stops(server, ctl, handl
                 values.append((await _next_osc(ws)).args[0])
             assert len(values) < 200
             await ws.send_str(json.dumps({"COMMAND": "IGNORE", "DATA": "/vibsynth/ch/1/intensity"}))
-            await asyncio.sleep(0.1)
+            # the socket's frames are handled in order: once the ping's pong is back, IGNORE is applied
+            # (a fixed pause was too short on a loaded machine: the 0.75 below was still pushed)
+            await ws.send_bytes(encode_message("/vibsynth/ping", (7,), "i"))
+            pong = await _next_osc(ws)
+            assert pong.address == "/vibsynth/pong" and pong.args == (7,)
             ctl.set_knob("intensity", 0.75, channels=(0,))
             with pytest.raises(asyncio.TimeoutError):
                 await ws.receive(timeout=0.3)
