@@ -100,9 +100,6 @@ class SoundFileReader(BlockReader):
             raise
         self.position = 0
 
-    def _fail(self, why: str) -> InputError:
-        return InputError(f"{self.path}: {why}")
-
     def _check(self) -> None:
         f = self._file
         self.fs = float(f.samplerate)
@@ -136,10 +133,7 @@ class SoundFileReader(BlockReader):
             raise self._fail(f"cannot decode at {self.position / self.fs:.3f} s ({exc})") from None
         if x.shape[0] < n:  # a stream shorter than its header said: it ends here
             self.frames = self.position + x.shape[0]
-        if not np.isfinite(x).all():
-            bad = int(np.flatnonzero(~np.isfinite(x).all(axis=1))[0])
-            t = (self.position + bad) / self.fs
-            raise self._fail(f"NaN or infinite sample at {t:.3f} s (frame {self.position + bad:,}); not used")
+        self._refuse_non_finite(x)
         self.position += x.shape[0]
         return np.ascontiguousarray(x)
 

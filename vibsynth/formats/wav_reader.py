@@ -76,6 +76,16 @@ class BlockReader:
     def close(self) -> None:
         raise NotImplementedError
 
+    def _fail(self, why: str) -> InputError:
+        return InputError(f"{self.path}: {why}")
+
+    def _refuse_non_finite(self, x: NDArray[np.float64]) -> None:
+        """Raise for a block (read at ``position``) holding NaN or infinity, naming the first one's time."""
+        if not np.isfinite(x).all():
+            bad = int(np.flatnonzero(~np.isfinite(x).all(axis=1))[0])
+            t = (self.position + bad) / self.fs
+            raise self._fail(f"NaN or infinite sample at {t:.3f} s (frame {self.position + bad:,}); not used")
+
     def blocks(self, frames: int) -> Iterator[NDArray[np.float64]]:
         """Every remaining frame, in blocks of ``frames`` (the last may be shorter)."""
         while True:
@@ -140,9 +150,6 @@ class WavReader(BlockReader):
         self.position = 0
 
     # ------------------------------------------------------------------ header
-    def _fail(self, why: str) -> InputError:
-        return InputError(f"{self.path}: {why}")
-
     def _parse(self) -> None:
         fh = self._fh
         assert fh is not None
@@ -256,10 +263,8 @@ class WavReader(BlockReader):
         if len(raw) < n * self._frame_bytes:
             raise self._fail("ended early while reading (the file shrank?)")
         x = self._decode(raw)
-        if self._float and not np.isfinite(x).all():
-            bad = int(np.flatnonzero(~np.isfinite(x).all(axis=1))[0])
-            t = (self.position + bad) / self.fs
-            raise self._fail(f"NaN or infinite sample at {t:.3f} s (frame {self.position + bad:,}); not used")
+        if self._float:
+            self._refuse_non_finite(x)
         self.position += n
         return x
 
