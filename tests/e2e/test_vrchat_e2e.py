@@ -258,7 +258,18 @@ def test_a_vrchat_peer_drives_the_vest(vest):
             peer.frame({"Slap": True}, rng)
             seen = client.status()  # serve reads its socket in order: T was handled before this request
             marks["replied"] = cap.frame_time_now()
-            keys = ("ch16.clip", "vrchat.mapped", "vrchat.errors", "errors", "output", "late_commands", "schedule_full")
+            keys = (
+                "ch16.clip",
+                "ch16.clip_ms",
+                "clips_playing",
+                "scheduled_pending",
+                "vrchat.mapped",
+                "vrchat.errors",
+                "errors",
+                "output",
+                "late_commands",
+                "schedule_full",
+            )
             marks["clip"] = {key: seen.get(key) for key in keys}
 
         data, _ = record(LOOP_S + 0.5, slap)
@@ -278,6 +289,8 @@ def test_a_vrchat_peer_drives_the_vest(vest):
         print(f"slap: channel 16 {before:.1f} -> {after:.1f} dB, channel 1 (resting hand) {rms_db(data[:, 0]):.1f} dB")
         print(f"slap: capture gaps {cap.gaps}, status {marks['clip']}, now {client.status().get('output')}")
         assert before == -math.inf and after > -60 and late is not None and late < 0.02, serve_log()
+        everywhere = [rms_db(data[at : at + int(0.3 * rate), c]) for c in range(16)]
+        assert min(everywhere) > -50, everywhere  # the clip plays on every channel, the hand's too
 
         # -- /avatar/change resets everything: the resting hand's channels fall silent
         def change() -> None:

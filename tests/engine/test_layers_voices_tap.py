@@ -44,6 +44,24 @@ def test_a_layer_change_is_applied_at_its_frame_in_stream_order(small_bank):
     assert engine.layers() == [SOURCES]
 
 
+def test_a_move_due_at_a_block_start_waits_for_the_switch_queued_before_it(small_bank):
+    """How a clip starts: its layer switch is scheduled one block ahead, and its first move, due
+    at the same frame, reaches the ring only a block later (the producer was preempted between
+    the two). That move applies at the block's first sample after the switch, not before it
+    (where it was dropped as a move of a layer not yet driving, and the clip was silent)."""
+    engine = make(small_bank, channels=2, max_block=64)
+    engine.render(64)
+    start = engine.frame_position + 64
+    engine.submit(SetLayer(CLIP, at_frame=start))
+    engine.render(64)  # the switch waits in the schedule for the next block's first sample
+    engine.submit(SetKnob("intensity", 0.9, layer=CLIP, at_frame=start))
+    engine.submit(SetKnob("intensity", 0.3))  # the direct knobs, now, no longer drive
+    engine.render(64)
+    assert engine.layers() == [CLIP, CLIP]
+    assert intensities(engine) == pytest.approx([0.9, 0.9])
+    assert engine.stats.late_commands == 0 and engine.stats.pending == 0
+
+
 def test_cancel_drops_a_layers_queued_moves_but_not_later_ones(small_bank):
     engine = make(small_bank, channels=2)
     engine.submit(SetLayer(CLIP))

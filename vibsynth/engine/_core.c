@@ -324,6 +324,17 @@ static void drain(Core *c, int64_t block_start) {
     int64_t mask = c->ring_cap - 1;
     int taken = 0;
     int64_t done = 0;
+    /* The heap's commands due at this very frame were submitted before anything still in the
+     * ring (the ring is FIFO): apply them first. Otherwise a move due now that was drained late
+     * overtakes the layer switch queued before it for the same frame, and is dropped as a move
+     * of a layer that does not drive the channel yet (a clip started one block ahead, whose
+     * first moves reached the ring a block after its switch, was silent). */
+    while (c->heap_len && c->heap[0].at <= block_start) {
+        cmd_t cmd;
+        heap_pop(c, &cmd);
+        apply(c, &cmd, block_start);
+        done++;
+    }
     while (head != tail && taken < DRAIN_MAX) {
         const cmd_t *cmd = &c->ring[head & mask];
         int64_t at = cmd->at;

@@ -47,7 +47,8 @@ Commands
 :meth:`submit` pushes a command into a fixed-size single-producer ring in the compiled
 core (:mod:`vibsynth.engine._core`); producers serialise on a lock the audio thread never
 takes. At the start of each block the audio thread takes at most ``DRAIN_MAX`` (1024)
-commands from the ring: immediate commands apply at the block's first sample; commands
+commands from the ring (after the scheduled commands due at that very sample, which were
+submitted before them): immediate commands apply at the block's first sample; commands
 with a later ``at_frame`` go into a binary heap keyed (frame, sequence), preallocated to
 ``schedule_capacity``, and apply at **exactly** that sample (the block is split there); a
 command whose frame has already passed applies at the block's first sample and is counted
