@@ -4,7 +4,9 @@ The fake VRChat does what VRChat does on the network (its OSCQuery docs): it adv
 ``VRChat-Client-XXXXXX`` as ``_oscjson._tcp`` and ``_osc._udp`` over mDNS and answers ``HOST_INFO``
 with its OSC input (``OSC_PORT``: 9123 here, as VRChat started on another port); it browses for
 OSCQuery services, keeps those whose tree has ``/avatar`` and sends its avatar parameters to the OSC
-port their HOST_INFO names. Prints one JSON object with what each side saw.
+port their HOST_INFO names. Its own tree holds the avatar's current parameter values, as
+VRChat's does: a hand already resting (``Held`` 0.6) and a bool already true (``Poke``, a clip),
+which serve reads once it finds VRChat. Prints one JSON object with what each side saw.
 """
 
 from __future__ import annotations
@@ -32,9 +34,42 @@ HOST_INFO = {
 }
 
 
+AVATAR_ID = "avtr_11111111-2222-4333-8444-555555555555"
+#: VRChat's /avatar node: the avatar's id and each parameter's current value (names with "/" nest).
+AVATAR = {
+    "FULL_PATH": "/avatar",
+    "ACCESS": 0,
+    "CONTENTS": {
+        "change": {"FULL_PATH": "/avatar/change", "TYPE": "s", "ACCESS": 3, "VALUE": [AVATAR_ID]},
+        "parameters": {
+            "FULL_PATH": "/avatar/parameters",
+            "ACCESS": 0,
+            "CONTENTS": {
+                "Held": {"FULL_PATH": "/avatar/parameters/Held", "TYPE": "f", "ACCESS": 3, "VALUE": [0.6]},
+                "Poke": {"FULL_PATH": "/avatar/parameters/Poke", "TYPE": "T", "ACCESS": 3, "VALUE": [True]},
+                "Grounded": {"FULL_PATH": "/avatar/parameters/Grounded", "TYPE": "T", "ACCESS": 3, "VALUE": [True]},
+                "Go": {
+                    "FULL_PATH": "/avatar/parameters/Go",
+                    "ACCESS": 0,
+                    "CONTENTS": {
+                        "Hand": {"FULL_PATH": "/avatar/parameters/Go/Hand", "TYPE": "i", "ACCESS": 3, "VALUE": [1]}
+                    },
+                },
+            },
+        },
+    },
+}
+
+
 class VrchatHttp(BaseHTTPRequestHandler):
     def do_GET(self) -> None:  # noqa: N802 - http.server's name
-        body = json.dumps(HOST_INFO if "HOST_INFO" in self.path else {"FULL_PATH": "/", "ACCESS": 0}).encode()
+        if "HOST_INFO" in self.path:
+            tree: dict = HOST_INFO
+        elif self.path.startswith("/avatar"):
+            tree = AVATAR
+        else:
+            tree = {"FULL_PATH": "/", "ACCESS": 0}
+        body = json.dumps(tree).encode()
         self.send_response(200)
         self.send_header("Content-Type", "application/json")
         self.send_header("Content-Length", str(len(body)))
@@ -50,7 +85,11 @@ def main(folder: str) -> None:
     threading.Thread(target=http.serve_forever, daemon=True).start()
     advertiser = Advertiser(VRCHAT, 9123, http.server_address[1], ["127.0.0.1"])
     advertiser.start()
-    vrchat = "vrchat: {enabled: true, listen_port: 9001, parameters: [{name: Hug, channel: 1}]}\n"
+    vrchat = (
+        "audio: {channels: 4}\n"
+        "vrchat: {enabled: true, listen_port: 9001, parameters: [{name: Hug, channel: 1}, {name: Held, channel: 2},"
+        " {name: Go/Hand, channel: 3}, {name: Poke, clip: impact, channel: 4}]}\n"
+    )
     serve, _ = start_serve(folder, "vibsynth vest", extra=vrchat)
     out: dict = {}
     try:
@@ -76,6 +115,14 @@ def main(folder: str) -> None:
             time.sleep(0.5)
         out["vrchat_osc"] = status.get("vrchat.osc")
         out["intensity"] = osc.get("intensity")
+        while time.monotonic() < deadline and status.get("vrchat.primed", 0) < 3:
+            time.sleep(0.2)
+            status = osc.status()
+        out["primed"] = status.get("vrchat.primed")
+        out["avatar"] = status.get("vrchat.avatar")
+        out["held"] = osc.get("intensity", channel=2)  # read from VRChat's tree: no message was sent
+        out["hand"] = osc.get("intensity", channel=3)
+        out["poke_clip"] = status.get("ch4.clip")  # already true: a state, not a rising edge
         probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             probe.bind(("127.0.0.1", 9001))  # VRChat was found: serve closed its 9001 fallback socket

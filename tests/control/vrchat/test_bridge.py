@@ -144,6 +144,28 @@ def test_avatar_change_resets_everything(handler, peer, bridge, mixer, ctl, play
     assert player.stats.plays == 2 and peer.errors() == []
 
 
+def test_values_read_from_vrchat_start_the_bridge_without_playing_or_stroking(
+    handler, peer, bridge, mixer, ctl, player, clock
+):
+    changes = []
+    bridge.on_avatar_change = lambda: changes.append(True)
+    param(handler, peer, "Hug", 0.3)  # a message came first: newer than the tree's value
+    read = {"ChestL": 0.5, "Hug": 0.9, "Slap": 1.0, "Rub": 0.4, "Wet": 1.0, "Grounded": 1.0}
+    assert bridge.prime(read, "avtr_0f1e2d3c-0000-4000-8000-000000000001") == 4
+    assert view(mixer, 1).on and view(mixer, 1).intensity == pytest.approx(0.35)  # a resting hand is felt
+    assert ctl.state()[3].intensity == pytest.approx(0.3)  # the message's value stays
+    assert player.playing(1) is None and player.stats.plays == 0  # a bool already true: no edge
+    assert all(s.preset is None for s in ctl.state())  # nor a preset's threshold
+    assert ctl.state()[2].intensity == 0.0  # a velocity drive starts still
+    assert bridge.stats.primed == 4 and bridge.stats.avatar.endswith("0001") and bridge.stats.mapped == 1
+    param(handler, peer, "Slap", types="F")
+    param(handler, peer, "Slap", types="T")  # the next real edge plays
+    assert player.stats.plays == 1
+    send(handler, peer, "/avatar/change", "avtr_0f1e2d3c-0000-4000-8000-000000000002")
+    assert changes == [True]  # the service reads the new avatar's values
+    assert bridge.prime({"Hug": 0.7}) == 1 and ctl.state()[3].intensity == pytest.approx(0.7)
+
+
 def test_unmapped_parameters_are_counted_and_cost_nothing_else(handler, peer, bridge, mixer, ctl):
     rng = np.random.default_rng(11)
     before = (ctl.state(), [view(mixer, k) for k in range(1, 17)], dict(ctl.error_counts), len(ctl.engine.commands))

@@ -33,3 +33,7 @@ def test_vrchat_and_serve_find_each_other_in_a_private_namespace(tmp_path: Path)
     assert out["intensity"] == pytest.approx(0.5)  # the parameter it sent drove channel 1
     assert out["vrchat_osc"] == "udp://127.0.0.1:9123 (found over mDNS)"  # from its HOST_INFO
     assert out["fallback_closed"] is True
+    # VRChat's current values, read from its tree once found: a resting hand is felt without a message
+    assert out["primed"] == 3 and out["avatar"] == "avtr_11111111-2222-4333-8444-555555555555"
+    assert out["held"] == pytest.approx(0.6) and out["hand"] == pytest.approx(1.0)
+    assert out["poke_clip"] == ""  # a bool already true plays nothing

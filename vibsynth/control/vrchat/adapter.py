@@ -10,7 +10,10 @@ so the service builds it after OSC and OSCQuery (:func:`create` gets both). It a
   does not find over OSCQuery), closed once VRChat is found over mDNS (it then sends to our OSC
   port: one copy of each message);
 * VRChat's own OSC input (status ``vrchat.osc``): its HOST_INFO when found, else ``vrchat.host``
-  and ``vrchat.send_port``.
+  and ``vrchat.send_port``;
+* once VRChat is found, its current avatar parameter values, read from its OSCQuery tree
+  (:mod:`~vibsynth.control.vrchat.values`), so a hand already resting on a Contact Receiver is
+  felt at once; read again after each ``/avatar/change`` (status ``vrchat.primed``).
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ from vibsynth.control.controller import Controller
 from vibsynth.control.osc.transport import UdpTransport
 from vibsynth.control.vrchat.bridge import ROOT, VrchatBridge
 from vibsynth.control.vrchat.finder import VrchatAddress, pick
+from vibsynth.control.vrchat.values import read_avatar
+from vibsynth.errors import VibsynthError
 from vibsynth.settings.models_config import VibsynthConfig
 
 __all__ = ["VrchatService", "create"]
@@ -33,6 +38,8 @@ log = logging.getLogger(__name__)
 #: How long one mDNS browse for VRChat lasts, and the pause between browses until it is found.
 BROWSE_S = 3.0
 BROWSE_EVERY_S = 30.0
+#: After ``/avatar/change``, VRChat's tree is read again once the new avatar has loaded.
+REREAD_AFTER_S = 1.0
 
 
 class VrchatService:
@@ -50,7 +57,9 @@ class VrchatService:
         self.listener: UdpTransport | None = None
         self.find = find
         self._stop = threading.Event()
+        self._changed = threading.Event()
         self._finder: threading.Thread | None = None
+        bridge.on_avatar_change = self._changed.set
 
     def start(self) -> None:
         self.bridge.start()
@@ -82,8 +91,26 @@ class VrchatService:
                 self.bridge.found = found.describe()
                 log.info("VRChat found: OSC input %s; it sends avatar parameters over OSCQuery", found.describe())
                 self._close_listener()
+                self._follow_values(found.oscquery_url)
                 return
             self._stop.wait(BROWSE_EVERY_S)
+
+    def _follow_values(self, url: str) -> None:
+        """Prime the bridge from VRChat's tree now and after each avatar change, until stopped."""
+        self._changed.clear()
+        while not self._stop.is_set():
+            try:
+                found = read_avatar(url)
+            except VibsynthError as exc:
+                self.bridge.controller.count_error("vrchat.read")
+                log.warning("VRChat: cannot read its avatar parameters: %s", exc)
+            else:
+                primed = self.bridge.prime(found.parameters, found.avatar)
+                log.info("VRChat: %d mapped avatar parameter(s) read from its OSCQuery tree", primed)
+            while not self._stop.is_set() and not self._changed.wait(0.5):
+                pass
+            self._changed.clear()
+            self._stop.wait(REREAD_AFTER_S)
 
     def _close_listener(self) -> None:
         listener, self.listener = self.listener, None

@@ -24,7 +24,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -67,6 +67,7 @@ class Mapped:
     value: float = 0.0
     velocity: Velocity | None = None
     sounding: bool = False  # the last amount applied was > 0 (a velocity drive still to fade)
+    heard: bool = False  # a value arrived since the start or the last reset
 
 
 @dataclass
@@ -79,6 +80,7 @@ class VrchatStats:
     errors: int = 0  # refused downstream (unknown clip or preset, no layout...)
     avatar_changes: int = 0
     avatar: str = ""
+    primed: int = 0  # mapped parameters whose value was read from VRChat's OSCQuery tree
 
 
 @dataclass
@@ -120,6 +122,7 @@ class VrchatBridge:
         self.stats = VrchatStats()
         self.on_value: Callable[[str], None] = lambda path: None  # OSCQuery listeners (the adapter sets it)
         self.found: str = ""  # VRChat's OSC input address (HOST_INFO, or the fallback), for status
+        self.on_avatar_change: Callable[[], None] = lambda: None  # the service reads VRChat's values again
         self._lock = threading.RLock()
         self._tick = _Tick()
         self._by_name: dict[bytes, Mapped] = {}
@@ -173,6 +176,7 @@ class VrchatBridge:
             ("vrchat.errors", s.errors),
             ("vrchat.avatar_changes", s.avatar_changes),
             ("vrchat.avatar", s.avatar),
+            ("vrchat.primed", s.primed),
             ("vrchat.osc", self.found),
         ]
 
@@ -205,6 +209,7 @@ class VrchatBridge:
         now = self.clock()
         with self._lock:
             previous, mapped.value = mapped.value, value
+            mapped.heard = True
             kind, spec = mapped.kind, mapped.spec
             try:
                 if kind in ("clip", "preset"):
@@ -220,6 +225,46 @@ class VrchatBridge:
             with self._tick.cond:
                 self._tick.cond.notify()
         self.on_value(mapped.path)
+
+    def prime(self, values: Mapping[str, float], avatar: str = "") -> int:
+        """Start from VRChat's current values (its OSCQuery tree, read once it is found).
+
+        A mapped parameter no message has reached yet takes its value as if it had arrived, with
+        two differences: a value already above a clip's or preset's threshold is the state, not
+        a rising edge (nothing plays), and a velocity drive starts still (a resting value is no
+        stroke). A parameter a message already set keeps it (the message is newer than the read).
+
+        Parameters
+        ----------
+        values : mapping of str to float
+            Parameter name -> value (a bool as 1/0), :func:`vibsynth.control.vrchat.values.read_avatar`.
+        avatar : str
+            The avatar's id, for status (kept when empty).
+
+        Returns
+        -------
+        primed : int
+            Mapped parameters set.
+        """
+        primed = 0
+        with self._lock:
+            if avatar and not self.stats.avatar:
+                self.stats.avatar = avatar[:_AVATAR_ID_MAX]
+            for name, value in values.items():
+                mapped = self._by_name.get(name.encode())
+                if mapped is None or mapped.heard:
+                    continue
+                primed += 1
+                if mapped.kind in ("clip", "preset"):
+                    mapped.value = value
+                    mapped.heard = True
+                    self.on_value(mapped.path)
+                    continue
+                if mapped.velocity is not None:
+                    mapped.velocity.reset()
+                self.apply(mapped.spec.name, value)
+            self.stats.primed += primed
+        return primed
 
     def _refused(self, name: str, exc: VibsynthError) -> None:
         self.stats.errors += 1
@@ -299,12 +344,14 @@ class VrchatBridge:
         if len(msg.args) == 1 and msg.types in ("s", "S"):
             self.stats.avatar = str(msg.args[0])[:_AVATAR_ID_MAX]
         self.reset()
+        self.on_avatar_change()
 
     def reset(self) -> None:
         """Every mapped parameter back to 0: sources off, driven channels silent, the bridge's clips stopped."""
         with self._lock:
             for mapped in self._by_name.values():
                 mapped.value = 0.0
+                mapped.heard = False
                 if mapped.velocity is not None:
                     mapped.velocity.reset()
                 try:

@@ -23,11 +23,13 @@ SERVICE_PREFIX = "VRChat-Client-"
 
 @dataclass(frozen=True)
 class VrchatAddress:
-    """Where VRChat takes OSC (``host``, ``port``) and whether mDNS said so (``found``)."""
+    """Where VRChat takes OSC (``host``, ``port``), whether mDNS said so (``found``), and its
+    OSCQuery server (``oscquery_url``, "" when not found)."""
 
     host: str
     port: int
     found: bool
+    oscquery_url: str = ""
 
     def describe(self) -> str:
         return f"udp://{self.host}:{self.port} ({'found over mDNS' if self.found else 'not found; vrchat.send_port'})"
@@ -38,5 +40,5 @@ def pick(services: Sequence[Found], host: str, port: int) -> VrchatAddress:
     else the fallback ``host``:``port``."""
     for service in services:
         if service.name.startswith(SERVICE_PREFIX) and service.osc_host and service.osc_port:
-            return VrchatAddress(service.osc_host, int(service.osc_port), True)
+            return VrchatAddress(service.osc_host, int(service.osc_port), True, service.oscquery_url)
     return VrchatAddress(host, int(port), False)
