@@ -111,3 +111,46 @@ def test_a_calibrated_profile_sets_what_the_bank_s_level_means(tmp_path, monkeyp
         overrides = {"audio": {"rate": 16000}, "bank": bank, "actuator": {"profile": name}}
         keys[name] = build_engine(load_config(overrides=overrides, user_file=False).settings).bank.key
     assert keys["cal"]["intensity"][0] == "weighting" and "intensity" not in keys["plain"]
+
+
+def test_the_osc_server_binds_first_and_answers_last(tmp_path, monkeypatch, capsys):
+    """A client's first ``/status`` already lists every part: the OSC port is bound before OSCQuery
+    (whose HOST_INFO names it) and VRChat need it, and answered only once they, the studio and the
+    output run (before, a /status sent during start-up lacked their keys)."""
+    from vibsynth.control.osc.server import OscServer
+    from vibsynth.control.oscquery.adapter import OscQueryService
+    from vibsynth.control.studio.server import StudioServer
+    from vibsynth.control.vrchat.adapter import VrchatService
+    from vibsynth.engine.outputs import NullOutput
+
+    order: list[str] = []
+    for cls, method in (
+        (OscServer, "bind"),
+        (OscServer, "start"),
+        (OscQueryService, "start"),
+        (VrchatService, "start"),
+        (StudioServer, "start"),
+        (NullOutput, "start"),
+    ):
+        original = getattr(cls, method)
+
+        def wrapped(self, *args, _original=original, _name=f"{cls.__name__}.{method}", **kwargs):
+            order.append(_name)
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(cls, method, wrapped)
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    config = tmp_path / "config.yaml"
+    config.write_text(
+        "audio:\n  rate: 8000\n  channels: 2\nbank:\n  cache_dir: ''\n  loop_seconds: 0.5\n  levels: 3\n"
+        "osc:\n  port: 0\nstudio:\n  port: 0\ndiscovery:\n  oscquery_port: 0\n"
+        "vrchat:\n  enabled: true\n  listen_port: 0\n  parameters: [{name: Hug, channel: 2}]\n",
+        encoding="utf-8",
+    )
+    assert main(["serve", "--config", str(config), "--output", "null", "--seconds", "0.1", "--no-midi"]) == 0
+    answered = order.index("OscServer.start")
+    assert order[0] == "OscServer.bind", order
+    assert {"OscQueryService.start", "VrchatService.start", "StudioServer.start", "NullOutput.start"} <= set(
+        order[:answered]
+    ), order
+    assert "VRChat: 1 avatar parameter(s)" in capsys.readouterr().out

@@ -376,13 +376,18 @@ def _serve(settings: VibsynthConfig, args: Any, stop: threading.Event, owns_proc
     controller.output = output  # type: ignore[attr-defined]
 
     servers: list[Any] = []
+    answer_last: list[Any] = []  # bound now (their ports are known), answering once all is up
     watcher = None
     portaudio_clean = True
     try:
         for module in adapter_modules():
             server = module.create(settings, args, controller, library)
             if server is not None:
-                server.start()
+                if callable(getattr(server, "bind", None)):
+                    server.bind()
+                    answer_last.append(server)
+                else:
+                    server.start()
                 servers.append(server)
         _follow(settings, controller, servers)
         oscquery = _oscquery(settings, args, controller, library, servers)
@@ -393,6 +398,10 @@ def _serve(settings: VibsynthConfig, args: Any, stop: threading.Event, owns_proc
             watcher.start()
         if not stop.is_set():
             output.start()
+        # The OSC server answers last: its first /status already lists OSCQuery, Follow, VRChat
+        # and the studio (datagrams sent meanwhile wait in its receive buffer, in order).
+        for server in answer_last:
+            server.start()
 
         out = sys.stdout
         print(f"vibsynth: serving {engine.channels} channel(s) on {output.describe()}", file=out)

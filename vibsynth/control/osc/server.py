@@ -113,6 +113,7 @@ class OscServer:
             else None
         )
         self._started = False
+        self._bound = False
 
     def _closed(self, peer: PeerLike) -> None:
         """A TCP connection closed: end its subscriptions."""
@@ -155,14 +156,18 @@ class OscServer:
         """The bound UDP port (useful with port 0)."""
         return self.udp.port
 
-    def start(self) -> None:
-        """Bind the sockets and start the receive, notify and sync threads.
+    def bind(self) -> None:
+        """Bind the sockets: the port is known (HOST_INFO, the banner) and datagrams wait in the
+        kernel's receive buffer until :meth:`start` answers them. ``serve`` binds first and starts
+        last, so a client's first ``/status`` already sees every part of the service.
 
         Raises
         ------
         ConfigError
             If the address cannot be bound (e.g. port in use).
         """
+        if self._bound:
+            return
         try:
             self.udp.open()
             if self.tcp is not None:
@@ -174,6 +179,17 @@ class OscServer:
                 f"OSC: cannot listen on {self.udp.host}:{self.udp.port}: {exc.strerror or exc} "
                 "(set osc.port or --osc-port)"
             ) from None
+        self._bound = True
+
+    def start(self) -> None:
+        """Bind the sockets (unless :meth:`bind` did) and start the receive, notify and sync threads.
+
+        Raises
+        ------
+        ConfigError
+            If the address cannot be bound (e.g. port in use).
+        """
+        self.bind()
         self.notifier.start()
         self.monitor.start()
         self.sync_worker.start()
@@ -192,7 +208,7 @@ class OscServer:
         self.monitor.stop()
         self.sync_worker.stop()
         self.handler.close()
-        self._started = False
+        self._started = self._bound = False
 
     def describe(self) -> str:
         """One line for the start-up banner."""
