@@ -7,12 +7,11 @@ over OSCQuery and OSC).
 from __future__ import annotations
 
 import json
+import subprocess
 import sys
 import time
-from pathlib import Path
 
 import vibsynth
-from tests.clients.mono import run_mono
 from tests.netns import start_serve
 
 NAME = "vibsynth csharp"
@@ -25,15 +24,18 @@ def main(folder: str, exe: str) -> None:
         osc.send("/vibsynth/intensity", 0.375)
         osc.sync()
         found: dict[str, str] = {}
-        deadline = time.monotonic() + 30.0
+        attempts: list[str] = []
+        deadline = time.monotonic() + 60.0
         while time.monotonic() < deadline:  # mDNS probing and announcing take a second or two
-            found = run_mono(Path(exe), NAME, check=False)
+            done = subprocess.run(["mono", "--debug", exe, NAME], capture_output=True, text=True, timeout=60)
+            found = dict(line.partition("=")[::2] for line in done.stdout.splitlines() if "=" in line)
             # the first runs may browse while serve still probes its name (about 1 s): until both
             # the listing and the connection have seen it
             if "intensity" in found and found.get("service") == NAME:
                 break
+            attempts.append(f"exit {done.returncode}: {done.stdout[-300:]!r} {done.stderr[-300:]!r}")
             time.sleep(0.5)
-        print(json.dumps(found))
+        print(json.dumps({**found, "attempts": attempts, "serve_alive": serve.poll() is None}))
     finally:
         serve.terminate()
         serve.wait(20)
