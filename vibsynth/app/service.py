@@ -248,6 +248,8 @@ def _studio(settings: VibsynthConfig, args: Any, controller: Controller, library
 
 def _follow(settings: VibsynthConfig, controller: Controller, servers: list[Any]) -> None:
     """Start live Follow (``follow:``, ``serve --follow``) when it is on: the input and the follower."""
+    if not settings.follow.enabled:
+        return  # without importing the follower (scipy.signal: a second of every start)
     from vibsynth.control.follow import service
 
     follow = service.create(settings, controller)
