@@ -146,6 +146,7 @@ class JackCapture:
         self._next_frame: int | None = None
         self._blocks: list[tuple[int, int]] = []  # (data index, JACK frame) of each captured block
         self._armed = False
+        self._limit = self.data.shape[0]  # frames this capture records (arm(seconds) shortens it)
         self._done = threading.Event()
         self.client.set_process_callback(self._process)
         self.client.activate()
@@ -154,7 +155,7 @@ class JackCapture:
         if not self._armed or self._done.is_set():
             return
         pos = self.frames_captured
-        n = min(frames, self.data.shape[0] - pos)
+        n = min(frames, self._limit - pos)
         now = self.client.last_frame_time
         if pos == 0:
             self.start_frame = now
@@ -165,7 +166,7 @@ class JackCapture:
         for k, port in enumerate(self.inports):
             self.data[pos : pos + n, k] = port.get_array()[:n]
         self.frames_captured = pos + n
-        if self.frames_captured >= self.data.shape[0]:
+        if self.frames_captured >= self._limit:
             self._done.set()
 
     def connect(self, sources: Sequence[str]) -> None:
@@ -185,8 +186,10 @@ class JackCapture:
         self._next_frame = None
         self._blocks = []
 
-    def arm(self) -> None:
-        """Start recording at the next JACK cycle."""
+    def arm(self, seconds: float | None = None) -> None:
+        """Start recording at the next JACK cycle: ``seconds`` (at most the capacity; None = all of it)."""
+        capacity = self.data.shape[0]
+        self._limit = capacity if seconds is None else max(1, min(capacity, int(round(seconds * self.rate))))
         self._armed = True
 
     def index_of(self, frame: int) -> int:
@@ -217,7 +220,7 @@ class JackCapture:
     def wait(self, timeout: float | None = None) -> bool:
         """Block until full (True) or timeout (False)."""
         if timeout is None:
-            timeout = self.data.shape[0] / self.rate + 10.0
+            timeout = self._limit / self.rate + 10.0
         return self._done.wait(timeout)
 
     def close(self) -> None:

@@ -179,7 +179,7 @@ def test_a_vrchat_peer_drives_the_vest(vest):
             """Capture ``seconds`` while ``during(cap)`` runs; the samples and the frame the capture began."""
             cap.reset()
             cap.data[:] = 0
-            cap.arm()
+            cap.arm(seconds)
             while cap.start_frame is None:
                 time.sleep(0.001)
             if during is not None:
@@ -193,7 +193,7 @@ def test_a_vrchat_peer_drives_the_vest(vest):
             for k in range(136):  # 1.5 s at 90 Hz, 0 -> 1
                 peer.frame({"SpineSlide": round(0.02 + 0.98 * k / 135, 4)}, rng)
 
-        data, _ = record(LOOP_S + 0.5, slide)
+        data, _ = record(2.0, slide)
         hop = rate // 50
         rows = [8, 10, 12, 14]
         envelopes = [np.array([rms_db(data[i : i + hop, c]) for i in range(0, int(1.6 * rate), hop)]) for c in rows]
@@ -272,7 +272,7 @@ def test_a_vrchat_peer_drives_the_vest(vest):
             )
             marks["clip"] = {key: seen.get(key) for key in keys}
 
-        data, _ = record(LOOP_S + 0.5, slap)
+        data, _ = record(1.5, slap)
         at = cap.index_of(marks["slap"])
         before, after = rms_db(data[:at, 15]), rms_db(data[at:, 15])
         onset = np.flatnonzero(np.abs(data[at:, 15]) > 0)
