@@ -278,6 +278,11 @@ def test_calibrate_tab_shows_the_response_curve_and_band_and_applies_it(lab):
     shot(browser, tmp, "calibrate-tab")
     visible(browser, "calibrate-apply").click()
     wait(browser, lambda b: "now has the band" in visible(b, "calibrate-status").text, "applied")
+    # kept: serve's config file (--config) now assigns the profile to the channel, the rest unchanged
+    config = tmp / "serve" / "vibsynth.yaml"
+    assert f"Kept in {config}" in visible(browser, "calibrate-status").text
+    kept = yaml.safe_load(config.read_text())
+    assert kept["actuator"]["channel_profiles"] == ["my-coil"] and kept["audio"]["rate"] == 8000
     written = yaml.safe_load((user / "my-coil.yaml").read_text())
     assert written["band_hz"] == pytest.approx(expected, abs=0.051) and written["response"] == doc["response"]
     assert "lab iso-intensity curve" in written["provenance"]["iso_curve"]

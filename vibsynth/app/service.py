@@ -231,6 +231,7 @@ def _studio(settings: VibsynthConfig, args: Any, controller: Controller, library
     """Start the studio (after the other adapters: it shows their status); None when disabled."""
     from vibsynth.app.studio_tabs import studio_extensions
     from vibsynth.control.studio import adapter as studio_adapter
+    from vibsynth.settings.config_write import user_config_path
 
     studio = studio_adapter.create(
         settings,
@@ -238,7 +239,9 @@ def _studio(settings: VibsynthConfig, args: Any, controller: Controller, library
         controller,
         library,
         servers=list(servers),
-        extensions=studio_extensions(settings, controller, library),
+        extensions=studio_extensions(
+            settings, controller, library, config_path=user_config_path(getattr(args, "config", None))
+        ),
     )
     if studio is not None:
         studio.start()

@@ -93,7 +93,7 @@ def trimmed(tmp_path, monkeypatch, engine, controller, basis):
     engine.trim_context = TrimContext(basis, reference, PAPER_WEIGHTING, 40.0)
     overrides = {"lab.folder": str(tmp_path / "sessions"), "audio.rate": 16000, "audio.channels": 2}
     config = load_config(None, overrides=overrides, user_file=False)
-    service = CalibrateService(config.settings, controller.channels, engine)
+    service = CalibrateService(config.settings, controller.channels, engine, config_path=tmp_path / "vibsynth.yaml")
     ext = StudioExtension(name="calibrate", title="Calibrate", script=SCRIPT, add_routes=service.add_routes)
     server = StudioServer(controller, port=0, extensions=[ext])
     server.start()
@@ -111,6 +111,37 @@ def test_applying_a_profile_to_a_channel_trims_it_now(trimmed):
     assert (off1, gain1) == (0.0, 1.0)  # the other channel is untouched
     assert off2 < -0.05 and gain2 > 1.2  # low end 25 dB down (felt brighter), 6 dB less sensitive
     assert "gain +" in done["trim"]
+
+
+def test_apply_to_channel_is_kept_in_the_config_with_its_comments(trimmed, tmp_path):
+    from vibsynth.settings.config import load_config
+    from vibsynth.settings.layouts import channel_profile_names
+
+    _, service, _ = trimmed
+    config = tmp_path / "vibsynth.yaml"
+    config.write_text("# my rig\naudio: {rate: 16000, channels: 2}  # two coils\nactuator:\n  max_boost_db: 40\n")
+    _user_profile("coil-a")
+    _user_profile("coil-b", gain=-6.0)
+    assert service._retrim(2, "coil-b")["saved"] == str(config)
+    done = service._retrim(1, "coil-a")  # the second apply keeps the first
+    assert done["config"] == "actuator.channel_profiles: [coil-a, coil-b]" and done["saved"] == str(config)
+    text = config.read_text()
+    assert "# my rig" in text and "# two coils" in text and "max_boost_db: 40" in text
+    assert "channel_profiles: [coil-a, coil-b]" in text
+    assert channel_profile_names(load_config(config, user_file=False).settings) == ["coil-a", "coil-b"]
+
+
+def test_a_config_that_cannot_be_written_keeps_the_trim_and_says_why(trimmed, tmp_path):
+    _, service, engine = trimmed
+    config = tmp_path / "vibsynth.yaml"
+    config.write_text("a: &x [1]\nb: *x\n")  # an alias: the loader refuses the file
+    before = config.read_bytes()
+    _user_profile("coil-b", gain=-6.0)
+    done = service._retrim(2, "coil-b")
+    engine.render(2048)
+    assert done["applied"] is True and done["saved"] is None and "alias" in done["save_error"]
+    assert "\n" not in done["save_error"] and config.read_bytes() == before and service.errors == 1
+    assert engine.trim_values()[1] != (0.0, 1.0)  # it plays: only the saving failed
 
 
 @pytest.mark.parametrize(

@@ -281,7 +281,7 @@ class ClipLane:
         )
 
 
-def studio_extension(settings: VibsynthConfig, controller: Any, library: Any) -> Any:
+def studio_extension(settings: VibsynthConfig, controller: Any, library: Any, *, config_path: Any = None) -> Any:
     """The clip lane tab (``library`` is the preset library, not used: clips have their own)."""
     from vibsynth.control.studio.extension import StudioExtension
 

@@ -46,14 +46,20 @@ class CalibrateService:
         The running engine, to trim a channel for the profile applied to it (None: only the file is written).
     """
 
-    def __init__(self, settings: VibsynthConfig, channels: int, engine: Any = None) -> None:
+    def __init__(
+        self, settings: VibsynthConfig, channels: int, engine: Any = None, *, config_path: Path | None = None
+    ) -> None:
         from vibsynth.research.lab.session import sessions_root
+        from vibsynth.settings.layouts import channel_profile_names
 
         self.settings = settings
         self.channels = channels
         self.engine = engine
         self.root = sessions_root(settings.lab)
         self.errors = 0
+        self.config_path = config_path
+        #: each channel's profile as applied so far (the config's, then every "apply to channel")
+        self.assigned: list[str | None] = list(channel_profile_names(settings))
 
     def setup(self) -> dict[str, Any]:
         """Channels, the profile in use, the profiles and the lab's iso-intensity sessions."""
@@ -172,26 +178,48 @@ class CalibrateService:
             )
 
     def _retrim(self, channel: int, name: str) -> dict[str, Any]:
-        """Give the running engine's channel this profile now: its trim, and what the config needs to keep it."""
+        """Give the running engine's channel this profile now (its trim) and keep it: the config line
+        ``actuator.channel_profiles`` with every channel's profile, written into the user's config."""
         from vibsynth.engine.actuator import ActuatorResponse
         from vibsynth.engine.trims import ChannelActuator, TrimContext, retrim_channel
         from vibsynth.settings.actuators import load_actuator_profile, profile_intensity
-        from vibsynth.settings.layouts import channel_profile_names
 
-        names: list[str | None] = list(channel_profile_names(self.settings))
+        names = list(self.assigned)
         names[channel - 1] = name
-        keep = "actuator.channel_profiles: [" + ", ".join(n or "null" for n in names) + "]"
+        out: dict[str, Any] = {"applied": False}
         context = getattr(self.engine, "trim_context", None)
-        if not isinstance(context, TrimContext):
-            return {"applied": False, "config": keep}
-        profile = load_actuator_profile(name)
-        response = ActuatorResponse.from_points(
-            profile["response"], max_boost_db=context.max_gain_db, absolute=bool(profile["absolute"])
+        if isinstance(context, TrimContext):
+            profile = load_actuator_profile(name)
+            response = ActuatorResponse.from_points(
+                profile["response"], max_boost_db=context.max_gain_db, absolute=bool(profile["absolute"])
+            )
+            trim = retrim_channel(
+                self.engine, context, channel - 1, ChannelActuator(name, response, profile_intensity(name))
+            )
+            out = {"applied": True, "trim": trim.describe()}
+        self.assigned = names
+        return (
+            out
+            | {"config": "actuator.channel_profiles: [" + ", ".join(n or "null" for n in names) + "]"}
+            | (self._keep(names))
         )
-        trim = retrim_channel(
-            self.engine, context, channel - 1, ChannelActuator(name, response, profile_intensity(name))
-        )
-        return {"applied": True, "trim": trim.describe(), "config": keep}
+
+    def _keep(self, names: list[str | None]) -> dict[str, Any]:
+        """Write ``actuator.channel_profiles`` into the user's config: ``{"saved": FILE}``, or why not."""
+        from vibsynth.errors import ConfigError
+        from vibsynth.settings.config_write import write_config_key
+
+        if self.config_path is None:
+            return {"saved": None}
+        try:
+            path = write_config_key(self.config_path, "actuator.channel_profiles", names)
+        except (ConfigError, OSError) as exc:
+            self.errors += 1
+            why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            log.warning("calibrate: the channel's profile plays but was not saved: %s", why)
+            return {"saved": None, "save_error": why}
+        log.info("calibrate: actuator.channel_profiles written to %s", path)
+        return {"saved": str(path)}
 
     # ------------------------------------------------------------------ HTTP
     def add_routes(self, app: Any, host: StudioHost) -> None:
@@ -213,7 +241,12 @@ class CalibrateService:
         return web.json_response({"message": message.splitlines()[0] if message else "refused"}, status=400)
 
 
-def studio_extension(settings: VibsynthConfig, controller: Any, library: Any) -> StudioExtension | None:
-    """The Calibrate tab (``vibsynth/app/studio_tabs.py`` lists this module)."""
-    service = CalibrateService(settings, int(controller.channels), getattr(controller, "engine", None))
+def studio_extension(
+    settings: VibsynthConfig, controller: Any, library: Any, *, config_path: Path | None = None
+) -> StudioExtension | None:
+    """The Calibrate tab (``vibsynth/app/studio_tabs.py`` lists this module); "apply to channel"
+    writes ``actuator.channel_profiles`` into ``config_path`` (None: it only answers the line)."""
+    service = CalibrateService(
+        settings, int(controller.channels), getattr(controller, "engine", None), config_path=config_path
+    )
     return StudioExtension(name="calibrate", title="Calibrate", script=SCRIPT, add_routes=service.add_routes)

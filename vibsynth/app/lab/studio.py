@@ -377,7 +377,9 @@ def json_handler(work: Any, refuse: Any, *, body: bool = True) -> Any:
     return handle
 
 
-def studio_extension(settings: VibsynthConfig, controller: Any, library: Any) -> StudioExtension | None:
+def studio_extension(
+    settings: VibsynthConfig, controller: Any, library: Any, *, config_path: Any = None
+) -> StudioExtension | None:
     """The Lab tab (``vibsynth/app/studio_tabs.py`` lists this module): ``lab:`` and ``knobs:``."""
     service = LabService(settings.lab, settings.knobs, controller, library)
     return StudioExtension(name="lab", title="Lab", script=STATIC / "lab_tab.js", add_routes=service.add_routes)

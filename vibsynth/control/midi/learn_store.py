@@ -8,33 +8,9 @@ from pathlib import Path
 from typing import Any
 
 from vibsynth.control.midi.bindings import DEFAULT_NRPN, KNOBS, OPTIONAL_KNOBS, Binding
-from vibsynth.settings.config import CONFIG_ENV_VAR, user_config_file
+from vibsynth.settings.config_write import dump_round_trip, load_round_trip, user_config_path
 
-
-def user_config_path(explicit: str | os.PathLike[str] | None = None, env: Mapping[str, str] | None = None) -> Path:
-    """The config file MIDI learn writes to: the file the config layer reads as the user's.
-
-    The rule of :func:`vibsynth.settings.config.load_config`: ``--config`` if given, else
-    ``$VIBSYNTH_CONFIG`` if set and not empty, else the platform file
-    (:func:`vibsynth.settings.config.user_config_file`), which is created when missing.
-
-    Parameters
-    ----------
-    explicit : path-like, optional
-        The ``--config`` argument.
-    env : mapping, optional
-        Environment (default ``os.environ``).
-
-    Returns
-    -------
-    path : Path
-    """
-    env = os.environ if env is None else env
-    if explicit:
-        return Path(explicit).expanduser()
-    if env.get(CONFIG_ENV_VAR):
-        return Path(env[CONFIG_ENV_VAR]).expanduser()
-    return user_config_file()
+__all__ = ["user_config_path", "save_learned_mapping"]
 
 
 def save_learned_mapping(
@@ -67,23 +43,10 @@ def save_learned_mapping(
     OSError
         The file cannot be written (the old one is untouched).
     """
-    import io as _io
-
-    from ruamel.yaml import YAML
     from ruamel.yaml.comments import CommentedMap, CommentedSeq
 
-    from vibsynth.errors import ConfigError
-    from vibsynth.formats.files import atomic_write
-    from vibsynth.formats.yamlio import load_yaml
-
     path = Path(path)
-    doc = None
-    if path.exists():
-        doc = load_yaml(path, round_trip=True, error=ConfigError, what="a config file").data
-    if doc is None:
-        doc = CommentedMap()
-    if not isinstance(doc, dict):
-        raise ConfigError(f"{path}: the config must be a mapping of sections, not {type(doc).__name__}")
+    doc = load_round_trip(path)
     midi = doc.get("midi")
     if midi is None:
         midi = doc["midi"] = CommentedMap()
@@ -103,9 +66,7 @@ def save_learned_mapping(
         entries.fa.set_flow_style()
         mapping[knob] = entries
     _drop_displaced_shorthand(midi, bindings)
-    text = _io.StringIO()
-    YAML().dump(doc, text)  # round-trip dumper: comments and layout kept
-    atomic_write(path, text.getvalue())
+    dump_round_trip(path, doc)
 
 
 def _drop_displaced_shorthand(midi: Any, bindings: list[Binding]) -> None:

@@ -77,7 +77,9 @@ export async function mount(panel, studio) {
   apply.addEventListener("click", async () => {
     const done = await call("apply", { channel: Number(channel.value), profile: profile.value, sessions: chosen() });
     if (done) status.textContent = `Channel ${done.channel}: ${done.profile} now has the band ${fmt(done.band_hz[0], 1)}–${fmt(done.band_hz[1], 1)} Hz (${done.file}).` +
-      (done.applied ? ` The channel plays it now: ${done.trim}.` : "") + ` To keep it after a restart: ${done.config}`;
+      (done.applied ? ` The channel plays it now: ${done.trim}.` : "") +
+      (done.saved ? ` Kept in ${done.saved}: ${done.config}` :
+        ` Not saved${done.save_error ? ` (${done.save_error})` : ""}; to keep it after a restart, add: ${done.config}`);
   });
 
   const setup = await call("setup");
