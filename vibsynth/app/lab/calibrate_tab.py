@@ -198,11 +198,8 @@ class CalibrateService:
             )
             out = {"applied": True, "trim": trim.describe()}
         self.assigned = names
-        return (
-            out
-            | {"config": "actuator.channel_profiles: [" + ", ".join(n or "null" for n in names) + "]"}
-            | (self._keep(names))
-        )
+        out["config"] = "actuator.channel_profiles: [" + ", ".join(n or "null" for n in names) + "]"
+        return out | self._keep(names)
 
     def _keep(self, names: list[str | None]) -> dict[str, Any]:
         """Write ``actuator.channel_profiles`` into the user's config: ``{"saved": FILE}``, or why not."""
