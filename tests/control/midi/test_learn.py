@@ -15,10 +15,11 @@ from tests.control.midi.fakes import FakeEngine, midi_settings
 from vibsynth.control.controller import Controller
 from vibsynth.control.midi.adapter import learn
 from vibsynth.control.midi.bindings import Binding, MidiSettings, parse_bindings
-from vibsynth.control.midi.learn_store import save_learned_mapping, user_config_path
+from vibsynth.control.midi.learn_store import save_learned_mapping
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import MidiServer
 from vibsynth.settings.config import CONFIG_ENV_VAR, default_config_data, load_config, user_config_file
+from vibsynth.settings.config_write import user_config_path
 
 USER_CONFIG = """\
 # my studio setup -- keep this comment

@@ -12,12 +12,12 @@ import mido
 
 from vibsynth.control.midi.bindings import KNOBS, MidiSettings, check_learn_knob
 from vibsynth.control.midi.clipnotes import ClipNotes
-from vibsynth.control.midi.learn_store import user_config_path
 from vibsynth.control.midi.mapper import MidiMapper
 from vibsynth.control.midi.server import VIRTUAL_PORT_NAME, MidiServer, _one_line, resolve_port_name, running_servers
 from vibsynth.control.spatial.midi import PositionControllers
 from vibsynth.errors import DeviceError
 from vibsynth.settings.cli_args import flag_type
+from vibsynth.settings.config_write import user_config_path
 from vibsynth.settings.models_config import VibsynthConfig
 
 log = logging.getLogger(__name__)

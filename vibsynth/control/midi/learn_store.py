@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import Any
 
 from vibsynth.control.midi.bindings import DEFAULT_NRPN, KNOBS, OPTIONAL_KNOBS, Binding
-from vibsynth.settings.config_write import dump_round_trip, load_round_trip, user_config_path
+from vibsynth.settings.config_write import dump_round_trip, load_round_trip
 
-__all__ = ["user_config_path", "save_learned_mapping"]
+__all__ = ["save_learned_mapping"]
 
 
 def save_learned_mapping(
