@@ -3,8 +3,10 @@
 Every ``import`` in every module is checked, including the lazy ones inside functions, so a
 deferred import cannot hide a dependency that runs back up the layers (docs/architecture.md,
 "Layout"), nor a circle between modules: a function-level import that dodges a circle at
-import time is still the circle. Imports under ``if TYPE_CHECKING:`` never run; they count
-for the layers but not for circles (a registry may name the type of what registers itself).
+import time is still the circle, and so is an import under ``if TYPE_CHECKING:`` (the types
+depend on each other even where the code does not). One exception: a package's
+``__init__.py`` may name, for typing only, the type of a module inside it (a registry naming
+what registers itself); a submodule always depends on its package, whose ``__init__`` runs first.
 Below ``app`` nothing imports the package's face (``import vibsynth``, ``from vibsynth import
 __version__``): the version is in ``vibsynth/_version.py``.
 """
@@ -101,8 +103,11 @@ def _type_checking_lines(tree: ast.Module) -> set[int]:
     return lines
 
 
-def _runtime_edges(names: dict[str, Path]) -> dict[str, dict[str, int]]:
-    """Module -> {module of the package it imports when it runs (module level or in a function): line}."""
+def _edges(names: dict[str, Path]) -> dict[str, dict[str, int]]:
+    """Module -> {module of the package it imports (module level, in a function or for typing): line}.
+
+    A package's typing-only import of a module inside it is left out (the registry exception).
+    """
 
     def known(dotted: str) -> str | None:
         while dotted and dotted not in names:
@@ -115,7 +120,7 @@ def _runtime_edges(names: dict[str, Path]) -> dict[str, dict[str, int]]:
         typing_only = _type_checking_lines(tree)
         out = edges.setdefault(name, {})
         for node in ast.walk(tree):
-            if not isinstance(node, (ast.Import, ast.ImportFrom)) or node.lineno in typing_only:
+            if not isinstance(node, (ast.Import, ast.ImportFrom)):
                 continue
             if isinstance(node, ast.Import):
                 targets = [known(alias.name) for alias in node.names]
@@ -125,15 +130,18 @@ def _runtime_edges(names: dict[str, Path]) -> dict[str, dict[str, int]]:
                 module = ".".join([*base, node.module] if node.module else base)
                 targets = [known(f"{module}.{alias.name}") or known(module) for alias in node.names]
             for target in targets:
-                if target is not None and target != name and target.startswith(PACKAGE.name):
-                    out.setdefault(target, node.lineno)
+                if target is None or target == name or not target.startswith(PACKAGE.name):
+                    continue
+                if node.lineno in typing_only and path.name == "__init__.py" and target.startswith(f"{name}."):
+                    continue  # a package naming the type of its own module (a registry)
+                out.setdefault(target, node.lineno)
     return edges
 
 
 def _circles() -> list[str]:
-    """One line per circle of runtime imports: ``a (a.py:3) -> b (b.py:9) -> a``; empty without any."""
+    """One line per circle of imports: ``a (a.py:3) -> b (b.py:9) -> a``; empty without any."""
     names = _module_names()
-    edges = _runtime_edges(names)
+    edges = _edges(names)
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -220,21 +228,23 @@ def test_the_checker_sees_the_face_imported_below_app(tmp_path, monkeypatch):
     ]
 
 
-def test_the_checker_sees_a_circle_through_a_lazy_import_and_not_through_type_checking(tmp_path, monkeypatch):
+def test_the_checker_sees_a_circle_through_a_lazy_import_or_type_checking_but_not_a_registry(tmp_path, monkeypatch):
     fake = tmp_path / "vibsynth"
     (fake / "settings").mkdir(parents=True)
     (fake / "__init__.py").write_text("")
-    (fake / "settings" / "__init__.py").write_text("")
+    typing_import = "from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n    from {} import {}\n"
+    (fake / "settings" / "__init__.py").write_text(typing_import.format("vibsynth.settings.registry", "R"))
+    (fake / "settings" / "registry.py").write_text("from vibsynth import settings\n")  # the registry exception
     (fake / "settings" / "models.py").write_text("X = 1\n\n\ndef check():\n    from vibsynth.settings.files import y\n")
     (fake / "settings" / "files.py").write_text("from vibsynth.settings import models\n")
-    (fake / "settings" / "typed.py").write_text(
-        "from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n    from vibsynth.settings.user import U\n"
-    )
+    (fake / "settings" / "typed.py").write_text(typing_import.format("vibsynth.settings.user", "U"))
     (fake / "settings" / "user.py").write_text("from .typed import T\n")
     monkeypatch.setattr(sys.modules[__name__], "PACKAGE", fake)
     assert _circles() == [
         "vibsynth.settings.files (vibsynth/settings/files.py:1) -> "
-        "vibsynth.settings.models (vibsynth/settings/models.py:5) -> vibsynth.settings.files"
+        "vibsynth.settings.models (vibsynth/settings/models.py:5) -> vibsynth.settings.files",
+        "vibsynth.settings.typed (vibsynth/settings/typed.py:4) -> "
+        "vibsynth.settings.user (vibsynth/settings/user.py:1) -> vibsynth.settings.typed",
     ]
 
 

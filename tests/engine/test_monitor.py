@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import pytest
 
 from vibsynth.engine import monitor, monitor_patchbay
-from vibsynth.engine.inputs import SoundDeviceInput, open_input
+from vibsynth.engine.inputs import SoundDeviceInput
 from vibsynth.engine.monitor import MonitorInput, is_monitor_spec
 from vibsynth.engine.monitor_patchbay import JackPatcher, import_jack
 from vibsynth.errors import DeviceError
@@ -26,10 +26,10 @@ class FakeSoundDevice:
         return self._devices
 
 
-def test_monitor_is_the_word_and_open_input_makes_a_monitor_input():
+def test_monitor_is_the_word_and_an_unopened_monitor_has_no_ring():
     assert is_monitor_spec("monitor") and is_monitor_spec(" Monitor ") and not is_monitor_spec("monitor:1")
-    source = open_input("monitor", fs=48000.0, frame_clock=lambda: 0, host_api="JACK", block_size=128)
-    assert isinstance(source, MonitorInput) and source.fs == 48000.0
+    source = MonitorInput(fs=48000.0, host_api="JACK", block_size=128)
+    assert source.fs == 48000.0 and source.device_input is SoundDeviceInput  # the default: a real device input
     with pytest.raises(DeviceError, match="not open yet"):
         source.ring  # noqa: B018
 

@@ -15,7 +15,7 @@ the control layer reads any of them the same way:
 
 * :class:`~vibsynth.engine.monitor.MonitorInput`: what the system plays (``--follow monitor``).
 
-:func:`open_input` picks one from a ``--follow`` argument.
+:func:`vibsynth.engine.sources.open_input` picks one from a ``--follow`` argument.
 """
 
 from __future__ import annotations
@@ -45,7 +45,6 @@ __all__ = [
     "InputSpec",
     "SoundDeviceInput",
     "FileInput",
-    "open_input",
     "parse_input_spec",
     "level_db",
 ]
@@ -517,29 +516,3 @@ class FileInput:
             "position_s": round(self._ring.frames_captured / self._fs, 3),
             **_ring_status(self._ring, self._meter),
         }
-
-
-def open_input(
-    spec: str,
-    *,
-    fs: float,
-    frame_clock: Callable[[], int],
-    loop: bool = False,
-    **device_options: Any,
-) -> InputSource:
-    """A :class:`FileInput` when ``spec`` names a sound file (``.wav``, ``.flac``, ``.ogg``...), a
-    :class:`~vibsynth.engine.monitor.MonitorInput` for ``monitor`` (what the system plays), else a
-    :class:`SoundDeviceInput` (not opened).
-
-    ``device_options`` go to :class:`SoundDeviceInput` (``host_api``, ``block_size``, ...).
-    """
-    text = str(spec)
-    from vibsynth.formats.sound_reader import SOUND_SUFFIXES
-
-    if text.lower().endswith(SOUND_SUFFIXES) or Path(text).is_file():
-        return FileInput(text, fs=fs, frame_clock=frame_clock, loop=loop)
-    from vibsynth.engine.monitor import MonitorInput, is_monitor_spec  # it builds on this module
-
-    if is_monitor_spec(text):
-        return MonitorInput(fs=fs, device_input=SoundDeviceInput, **device_options)
-    return SoundDeviceInput(text, fs=fs, **device_options)

@@ -28,14 +28,12 @@ import sys
 import threading
 from collections.abc import Callable
 from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from vibsynth.engine.input_ring import InputRing
+from vibsynth.engine.inputs import SoundDeviceInput
 from vibsynth.engine.pa_stream import import_sounddevice
 from vibsynth.errors import DeviceError
-
-if TYPE_CHECKING:  # open_input (in inputs) makes monitor inputs: the class comes in as device_input
-    from vibsynth.engine.inputs import SoundDeviceInput
 
 __all__ = ["MONITOR", "MonitorInput", "PatchBay", "is_monitor_spec"]
 
@@ -166,8 +164,8 @@ class MonitorInput:
     poll_s : float
         How often the JACK worker looks at the graph.
     device_input : callable
-        Makes the PortAudio input (:class:`~vibsynth.engine.inputs.SoundDeviceInput`) from a spec,
-        ``fs``, ``host_api``, ``block_size`` and ``device_options``.
+        Makes the PortAudio input from a spec, ``fs``, ``host_api``, ``block_size`` and
+        ``device_options`` (default :class:`~vibsynth.engine.inputs.SoundDeviceInput`; tests pass a stand-in).
     device_options
         Passed to ``device_input``.
     """
@@ -176,7 +174,7 @@ class MonitorInput:
         self,
         *,
         fs: float,
-        device_input: Callable[..., SoundDeviceInput],
+        device_input: Callable[..., SoundDeviceInput] = SoundDeviceInput,
         host_api: str | int | None = None,
         block_size: int = 128,
         channels: int = 2,

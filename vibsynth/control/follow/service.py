@@ -1,7 +1,7 @@
 """``vibsynth serve``'s follow: the input named by ``follow.device`` and the follower, as one control server.
 
 :func:`create` builds (does not start) the input source (a PortAudio/JACK input, or a WAV file
-paced by the output clock: :func:`vibsynth.engine.inputs.open_input`) and the
+paced by the output clock: :func:`vibsynth.engine.sources.open_input`) and the
 :class:`~vibsynth.control.follow.follower.Follower`; :meth:`FollowService.start` opens the
 input and starts the worker, and makes the follower findable by the OSC table and the studio
 (:func:`vibsynth.control.follow.follower_of`).
@@ -15,7 +15,8 @@ from vibsynth.control import follow as registry
 from vibsynth.control.controller import Controller
 from vibsynth.control.follow.follower import Follower
 from vibsynth.dsp.basis import Basis
-from vibsynth.engine.inputs import InputSource, open_input
+from vibsynth.engine.inputs import InputSource
+from vibsynth.engine.sources import open_input
 from vibsynth.settings.models_config import VibsynthConfig
 
 __all__ = ["FollowService", "create"]
