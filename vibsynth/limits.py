@@ -21,6 +21,8 @@ __all__ = [
     "CLIP_RATE_MAX",
     "CLIP_LOOPS_MAX",
     "ACTUATOR_BOOST_MAX_DB",
+    "OSC_FAST_ADDRESS_MAX",
+    "OSC_PREFIX_MAX",
 ]
 
 #: Output channels the engine renders (``MAXCH`` in ``engine/_core.c``): ``audio.channels``.
@@ -45,3 +47,9 @@ CLIP_LOOPS_MAX = 10_000
 #: Largest boost the actuator compensation may be allowed (``actuator.max_boost_db``), in dB above
 #: the response's level in the intensity band: a measured voice coil is ~30 dB down at 10 Hz.
 ACTUATOR_BOOST_MAX_DB = 60.0
+#: Longest address (bytes) the compiled OSC fast path's table holds (``MAX_ADDR - 1`` in
+#: ``control/osc/_fast.c``; ``tests/control/osc/test_fast.py`` checks the built extension agrees).
+OSC_FAST_ADDRESS_MAX = 127
+#: Longest ``osc.prefix``: its longest fast-path address, ``{prefix}/ch/64/intensity`` at
+#: :data:`MAX_CHANNELS` (intensity is the longest of the fast methods), fits the table.
+OSC_PREFIX_MAX = OSC_FAST_ADDRESS_MAX - len(f"/ch/{MAX_CHANNELS}/intensity")

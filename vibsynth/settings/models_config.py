@@ -16,7 +16,7 @@ from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, Val
 from pydantic_core import PydanticCustomError
 
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
-from vibsynth.limits import ACTUATOR_BOOST_MAX_DB, GLIDE_MAX_MS, MAX_CHANNELS, SCHEDULE_CAPACITY_MAX
+from vibsynth.limits import ACTUATOR_BOOST_MAX_DB, GLIDE_MAX_MS, MAX_CHANNELS, OSC_PREFIX_MAX, SCHEDULE_CAPACITY_MAX
 from vibsynth.settings.fields import Section, SettingsModel, ValueModel, cross_problem, problem, setting
 from vibsynth.settings.models_clip_config import Clips
 from vibsynth.settings.models_discovery import Discovery
@@ -232,8 +232,9 @@ class Osc(Section):
     prefix: str = setting(
         "/vibsynth",
         "address prefix of every OSC method",
-        allowed="an OSC address like /vibsynth (no trailing /)",
+        allowed=f"an OSC address like /vibsynth (no trailing /), at most {OSC_PREFIX_MAX} characters",
         pattern=r"^(/[A-Za-z0-9_.\-]+)+$",
+        max_length=OSC_PREFIX_MAX,
     )
     allow: Annotated[list[str] | None, BeforeValidator(check_allow_list)] = setting(
         [],

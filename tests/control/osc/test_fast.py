@@ -14,12 +14,18 @@ import time
 import numpy as np
 import pytest
 
+from vibsynth.cli import main
 from vibsynth.control.controller import Controller
+from vibsynth.control.osc import _fast as _oscfast
+from vibsynth.control.osc import adapter as osc_adapter
 from vibsynth.control.osc.codec import decode_packet, encode_bundle, encode_message
 from vibsynth.control.osc.server import OscServer
 from vibsynth.engine.bank import BankSpec, build_bank
 from vibsynth.engine.engine import Engine
+from vibsynth.errors import ConfigError
 from vibsynth.formats.basis_file import default_basis
+from vibsynth.limits import MAX_CHANNELS, OSC_FAST_ADDRESS_MAX, OSC_PREFIX_MAX
+from vibsynth.settings.config import load_config
 
 
 @pytest.fixture(scope="module")
@@ -223,3 +229,70 @@ def test_bundles_beyond_the_schedule_cap_get_an_error_and_change_nothing(bank):
     finally:
         client.close()
         server.stop()
+
+
+# ---------------------------------------------------------------------- address length (issue 31, finding 6)
+def _receiver(bank, table):
+    engine = Engine(bank, channels=MAX_CHANNELS, max_block=512)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        return _oscfast.Receiver(sock.fileno(), engine._core, table, -3.0, 3.0, print, print, None)
+
+
+def test_the_built_table_holds_addresses_up_to_the_limit_the_settings_use(bank):
+    """limits.OSC_FAST_ADDRESS_MAX is the C table's (MAX_ADDR - 1): the longest fits, one more is refused."""
+    longest = b"/" + b"a" * (OSC_FAST_ADDRESS_MAX - 1)
+    _receiver(bank, [(longest, _oscfast.M_INTENSITY, MAX_CHANNELS - 1)])
+    with pytest.raises(ValueError, match="bad address"):
+        _receiver(bank, [(longest + b"a", _oscfast.M_INTENSITY, MAX_CHANNELS - 1)])
+
+
+def _prefix_config(tmp_path, prefix, channels):
+    path = tmp_path / "vibsynth.yaml"
+    path.write_text(f"osc:\n  port: 0\n  prefix: {prefix}\naudio:\n  channels: {channels}\n", encoding="utf-8")
+    return path
+
+
+def test_a_prefix_one_over_the_limit_is_refused_where_the_config_is_loaded(bank, tmp_path):
+    path = _prefix_config(tmp_path, "/" + "p" * OSC_PREFIX_MAX, MAX_CHANNELS)
+    with pytest.raises(ConfigError) as caught:
+        load_config(path, env={})
+    message = str(caught.value)
+    assert message.startswith(f"{path}:3: osc.prefix = ")
+    assert message.endswith(f"is {OSC_PREFIX_MAX + 1} characters long (allowed: at most {OSC_PREFIX_MAX})")
+    with pytest.raises(ConfigError, match=f"at most {OSC_PREFIX_MAX}"):  # a server made in code says the same
+        OscServer(Controller(Engine(bank, channels=1, max_block=512)), port=0, prefix="/" + "p" * OSC_PREFIX_MAX)
+
+
+def test_the_longest_prefix_serves_every_fast_address_on_the_most_channels(bank, tmp_path):
+    prefix = "/" + "p" * (OSC_PREFIX_MAX - 1)
+    settings = load_config(_prefix_config(tmp_path, prefix, MAX_CHANNELS), env={}).settings
+    assert settings.osc.prefix == prefix and len(prefix) == OSC_PREFIX_MAX
+    engine = Engine(bank, channels=MAX_CHANNELS, glide_s=0.0, max_block=512)
+    ctl = Controller(engine, initial_glide_s=0.0)
+    server = osc_adapter.create(settings, None, ctl, None)
+    server.start()
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as client:
+            client.settimeout(2.0)
+            target = ("127.0.0.1", server.port)
+            client.sendto(encode_message(f"{prefix}/ch/{MAX_CHANNELS}/intensity", (0.25,), "f"), target)
+            client.sendto(encode_message(f"{prefix}/ch/{MAX_CHANNELS}/texture", (0.5, 1.25), "ff"), target)
+            client.sendto(encode_message(f"{prefix}/ping", (7,), "i"), target)
+            assert decode_packet(client.recvfrom(65536)[0]).address == f"{prefix}/pong"
+        assert server.counters()["fast_path"] == 2
+        k = knobs(engine)
+        assert k[MAX_CHANNELS - 1][:2] == (0.5, 1.25) and k[0][:2] == (0.0, 0.0)
+    finally:
+        server.stop()
+
+
+def test_serve_starts_with_the_longest_prefix_on_the_most_channels(tmp_path, monkeypatch, capsys):
+    """``vibsynth serve`` used to die with 'unexpected ValueError: fast-path table: bad address'."""
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    prefix = "/" + "p" * (OSC_PREFIX_MAX - 1)
+    path = _prefix_config(tmp_path, prefix, MAX_CHANNELS)
+    with path.open("a", encoding="utf-8") as f:
+        f.write("  rate: 8000\nbank:\n  cache_dir: ''\n  loop_seconds: 0.5\n  levels: 3\nstudio:\n  enabled: false\n")
+    assert main(["serve", "--config", str(path), "--output", "null", "--seconds", "0.1", "--no-midi"]) == 0
+    assert "OSC on udp://127.0.0.1:" in capsys.readouterr().out

@@ -27,6 +27,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from vibsynth.errors import ConfigError, ParameterError
+from vibsynth.limits import OSC_PREFIX_MAX
 from vibsynth.settings.models_sources import MAX_SOURCES
 
 __all__ = [
@@ -139,13 +140,16 @@ def normalize_prefix(prefix: str | None) -> str:
     Raises
     ------
     ConfigError
-        If it does not start with ``/`` or contains pattern characters or spaces.
+        If it does not start with ``/``, contains pattern characters or spaces, or is longer than
+        :data:`~vibsynth.limits.OSC_PREFIX_MAX` (its fast-path addresses would not fit the table).
     """
     if prefix is None or prefix in ("", "/"):
         return ""
     prefix = str(prefix).rstrip("/")
     if not prefix.startswith("/") or any(c in PATTERN_CHARS or c.isspace() or c in "#," for c in prefix):
         raise ConfigError(f"osc.prefix {prefix!r} must start with '/' and contain no spaces or OSC pattern characters")
+    if len(prefix) > OSC_PREFIX_MAX:
+        raise ConfigError(f"osc.prefix is {len(prefix)} characters long (allowed: at most {OSC_PREFIX_MAX})")
     return prefix
 
 
