@@ -76,18 +76,19 @@ JACK's and PortAudio's audio threads (0 = normal scheduling)."""
 
 def _realtime(priority: int) -> bool:
     """Put the calling thread under SCHED_FIFO ``priority``; False where not allowed or not POSIX."""
-    setter = getattr(os, "sched_setscheduler", None)
-    if setter is None or priority <= 0:
+    if not hasattr(os, "sched_setscheduler") or priority <= 0:  # Windows, macOS
         return False
     try:
-        setter(0, os.SCHED_FIFO, os.sched_param(priority))  # pid 0: this thread (Linux)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))  # pid 0: this thread (Linux)
     except (OSError, ValueError):  # no CAP_SYS_NICE / RLIMIT_RTPRIO, or not supported
         return False
     return True
 
 
 def _normal() -> bool:
-    """Put the calling thread back under normal scheduling (SCHED_OTHER)."""
+    """Put the calling thread back under normal scheduling (SCHED_OTHER); False where not POSIX."""
+    if not hasattr(os, "sched_setscheduler"):  # Windows, macOS: the thread never left it
+        return False
     try:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except OSError:
