@@ -24,10 +24,35 @@ def full_validations(monkeypatch):
     return calls
 
 
-def test_one_serve_start_validates_the_config_once(tmp_path, monkeypatch, capsys, full_validations):
+@pytest.fixture
+def settings_of_calls(monkeypatch):
+    """Count entries to ``settings.typed.settings_of``, under whatever name a module imported it."""
+    import sys
+
+    from vibsynth.settings import typed
+
+    calls: list[str] = []
+    original = typed.settings_of
+
+    def counting(config):
+        caller = sys._getframe(1)
+        calls.append(f"{caller.f_globals['__name__']}.{caller.f_code.co_name}")
+        return original(config)
+
+    monkeypatch.setattr(typed, "settings_of", counting)  # modules imported from now on bind this one
+    for name, module in list(sys.modules.items()):
+        if name.startswith("vibsynth.") and getattr(module, "settings_of", None) is original:
+            monkeypatch.setattr(module, "settings_of", counting)
+    return calls
+
+
+def test_one_serve_start_validates_the_config_once(tmp_path, monkeypatch, capsys, full_validations, settings_of_calls):
     """Every part (engine, outputs, OSC, MIDI, clips, sources, studio, lab) gets its typed section.
 
-    Before, each re-made the model from the dict with ``settings_of``: 8 validations a start.
+    Before, each re-made the model from the dict with ``settings_of``: 8 validations a start; then
+    the layouts and actuator profiles still took the whole config and passed it through
+    ``settings_of`` (10 entries a start, each returning the model it was given). The loader builds
+    the model; nothing after it enters ``settings_of``.
     """
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
@@ -43,6 +68,12 @@ def test_one_serve_start_validates_the_config_once(tmp_path, monkeypatch, capsys
     out = capsys.readouterr().out
     assert "OSC on udp://" in out and "studio: http://" in out and "clips:" in out  # every part started
     assert full_validations == ["full"]
+    assert settings_of_calls == []
+    from vibsynth.settings.config import Config
+
+    assert Config(data={}).settings.audio.channels == 1 and settings_of_calls == [
+        "vibsynth.settings.config.settings"
+    ]  # it counts
 
 
 def test_serve_takes_the_typed_settings_and_validates_nothing(tmp_path, monkeypatch, capsys, full_validations):

@@ -260,21 +260,22 @@ def test_yaml_lines_are_one_based_and_nested():
 # --------------------------------------------------------------------------- actuator profiles
 def test_actuator_profiles_resolve():
     flat = load_config(user_file=False, env={})
-    assert all(db == 0.0 for _, db in resolve_actuator_response(flat))
+    assert all(db == 0.0 for _, db in resolve_actuator_response(flat.settings.actuator))
     coil = load_config(overrides={"actuator.profile": "hapcoil-example"}, user_file=False, env={})
-    points = resolve_actuator_response(coil)
+    points = resolve_actuator_response(coil.settings.actuator)
     peak_hz, peak_db = max(points, key=lambda p: p[1])
     assert peak_hz == 65 and peak_db > 6
     profile = load_actuator_profile("hapcoil-example")
     assert profile["example"] is True and "NOT A MEASUREMENT" in Path(profile["file"]).read_text()
-    assert resolve_actuator_response(load_config(overrides={"actuator.profile": None}, user_file=False, env={})) == []
+    none = load_config(overrides={"actuator.profile": None}, user_file=False, env={})
+    assert resolve_actuator_response(none.settings.actuator) == []
 
 
 def test_explicit_response_wins_over_profile():
     config = load_config(
         overrides={"actuator.profile": "hapcoil-example", "actuator.response": [[100, -3.0]]}, user_file=False, env={}
     )
-    assert resolve_actuator_response(config) == [(100.0, -3.0)]
+    assert resolve_actuator_response(config.settings.actuator) == [(100.0, -3.0)]
 
 
 def test_user_actuator_profile_and_its_errors(tmp_path):
@@ -283,12 +284,12 @@ def test_user_actuator_profile_and_its_errors(tmp_path):
     (folder / "mine.yaml").write_text("name: mine\ndescription: measured\nresponse:\n  - [50, 3]\n  - [40, 0]\n")
     config = load_config(overrides={"actuator.profile": "mine"}, user_file=False, env={})
     with pytest.raises(ConfigError, match=r"mine.yaml:3: response = .*does not increase"):
-        resolve_actuator_response(config)
+        resolve_actuator_response(config.settings.actuator)
     (folder / "mine.yaml").write_text("name: mine\nresponse: [[40, 0]]\ngain: 3\n")
     with pytest.raises(ConfigError, match=r"mine.yaml:3: unknown key 'gain'"):
-        resolve_actuator_response(config)
+        resolve_actuator_response(config.settings.actuator)
     (folder / "mine.yaml").write_text("name: mine\nresponse: [[40, 0], [50, 3]]\n")
-    assert resolve_actuator_response(config) == [(40.0, 0.0), (50.0, 3.0)]
+    assert resolve_actuator_response(config.settings.actuator) == [(40.0, 0.0), (50.0, 3.0)]
 
 
 def test_docs_list_every_key_and_env_var():
@@ -394,7 +395,7 @@ def test_actuator_profile_bomb_is_refused(tmp_path):
     (folder / "coil.yaml").write_text("name: coil\nresponse: [[40, 0]]\n" + BOMB)
     config = load_config(overrides={"actuator.profile": "coil"}, user_file=False, env={})
     with pytest.raises(ConfigError, match=r"coil.yaml:4:8: YAML alias '\*a' .* not allowed in an actuator profile"):
-        resolve_actuator_response(config)
+        resolve_actuator_response(config.settings.actuator)
 
 
 def test_config_check_and_the_midi_input_agree_on_bindable_controllers(tmp_path):

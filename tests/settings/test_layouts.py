@@ -82,7 +82,7 @@ def test_shipped_layouts_validate_against_the_schema():
 # --------------------------------------------------------------------------- a config names a layout
 def test_a_config_names_a_layout(tmp_path):
     _, cfg = config(tmp_path, "audio:\n  channels: 16\nlayout: vest-back\n")
-    layout = resolve_layout(cfg)
+    layout = resolve_layout(cfg.settings.layout)
     assert isinstance(layout, Layout) and layout.name == "vest-back"
     assert layout.channels == tuple(range(16))
     assert layout.coordinates[0] == pytest.approx((-0.15, -0.12, 0.15))
@@ -91,11 +91,11 @@ def test_a_config_names_a_layout(tmp_path):
 
 def test_an_inline_layout_resolves_too(tmp_path):
     _, cfg = config(tmp_path, "audio:\n  channels: 4\nlayout:\n  3: {x: 0.1, y: 0}\n  1: {x: 0, y: 0, name: a}\n")
-    layout = resolve_layout(cfg)
+    layout = resolve_layout(cfg.settings.layout)
     assert layout.channels == (0, 2) and layout.names == ["a", None]
     assert layout.describe() == "inline layout (2 actuators)"
     _, none = config(tmp_path, "audio:\n  channels: 4\n")
-    assert resolve_layout(none) is None
+    assert resolve_layout(none.settings.layout) is None
 
 
 @pytest.mark.parametrize(
@@ -120,7 +120,7 @@ def test_a_user_layout_replaces_a_shipped_one_and_its_errors_name_its_file(tmp_p
     folder.mkdir(parents=True)
     (folder / "glove.yaml").write_text("channels:\n  1: {x: 0.01, y: 0.02, name: thumb}\n")
     _, cfg = config(tmp_path, "layout: glove\n")
-    assert resolve_layout(cfg).coordinates == [(0.01, 0.02, 0.0)]
+    assert resolve_layout(cfg.settings.layout).coordinates == [(0.01, 0.02, 0.0)]
 
     (folder / "glove.yaml").write_text("name: glove\nchannels:\n  1: {x: 0.01, y: 0.02}\n  2: {x: 12, y: 0}\n")
     with pytest.raises(ConfigError) as info:
@@ -215,7 +215,7 @@ def test_channel_profiles_from_a_pattern_a_list_or_the_layout(tmp_path):
     )
     _, cfg = config(tmp_path, text)
     assert channel_profile_names(cfg.settings) == ["vest-ch3", None, None]
-    assert resolve_layout(cfg.settings).profiles == ["vest-ch3", None]
+    assert resolve_layout(cfg.settings.layout).profiles == ["vest-ch3", None]
     _, cfg = config(tmp_path, "audio:\n  channels: 2\n")
     assert channel_profile_names(cfg.settings) == [None, None]
 

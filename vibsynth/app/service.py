@@ -64,9 +64,11 @@ EXIT_DEADLINE_S = 1.5
 
 def actuator_from_settings(settings: VibsynthConfig) -> ActuatorResponse:
     """The actuator response to equalise for (explicit points, else the profile, else flat)."""
-    points = resolve_actuator_response(settings)
+    actuator = settings.actuator
     return ActuatorResponse.from_points(
-        points, max_boost_db=settings.actuator.max_boost_db, absolute=resolve_actuator_absolute(settings)
+        resolve_actuator_response(actuator),
+        max_boost_db=actuator.max_boost_db,
+        absolute=resolve_actuator_absolute(actuator),
     )
 
 
@@ -78,7 +80,9 @@ def channel_actuators(settings: VibsynthConfig) -> list[ChannelActuator] | None:
     names = channel_profile_names(settings)
     if not any(names):
         return None
-    base = ChannelActuator(settings.actuator.profile, actuator_from_settings(settings), config_intensity(settings))
+    base = ChannelActuator(
+        settings.actuator.profile, actuator_from_settings(settings), config_intensity(settings.actuator)
+    )
     out = []
     for name in names:
         if name is None:
@@ -121,7 +125,7 @@ def build_engine(
         basis = default_basis()
     channels = channel_actuators(settings)
     if channels is None:
-        reference, intensity = actuator_from_settings(settings), config_intensity(settings)
+        reference, intensity = actuator_from_settings(settings), config_intensity(settings.actuator)
     else:
         reference = mean_response([c.response for c in channels])
         intensity = channels[0].intensity

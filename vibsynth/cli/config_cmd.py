@@ -63,7 +63,7 @@ def cmd_show(args: argparse.Namespace) -> int:
     print(f"\nfiles read (lowest first): {', '.join(config.files)}", file=sys.stderr)
     actuator = config.settings.actuator
     if actuator.profile and actuator.response is None:
-        points = resolve_actuator_response(config.settings)
+        points = resolve_actuator_response(actuator)
         print(f"actuator profile {actuator.profile!r}: {len(points)} response points", file=sys.stderr)
     return 0
 

@@ -228,7 +228,7 @@ def cmd_from_recording(args: argparse.Namespace) -> int:
     knobs = settings.knobs
     from vibsynth.settings.actuators import config_intensity, profile_intensity
 
-    weighting = profile_intensity(args.profile) if args.profile else config_intensity(settings)
+    weighting = profile_intensity(args.profile) if args.profile else config_intensity(settings.actuator)
     try:
         result = analyze(
             recording.samples,

@@ -15,10 +15,9 @@ from pydantic_core import PydanticCustomError
 from vibsynth.dsp.felt_intensity import PAPER_WEIGHTING, IntensityWeighting, profile_weighting
 from vibsynth.errors import ConfigError, ParameterError
 from vibsynth.settings.fields import cross_problem
-from vibsynth.settings.models_config import VibsynthConfig
+from vibsynth.settings.models_config import Actuator, VibsynthConfig
 from vibsynth.settings.models_preset import ActuatorProfileModel
 from vibsynth.settings.paths import user_config_file
-from vibsynth.settings.typed import settings_of
 from vibsynth.settings.validation import did_you_mean, model_spec, validate
 from vibsynth.settings.yamldoc import read_yaml_file
 
@@ -170,30 +169,26 @@ def profile_intensity(name: str) -> IntensityWeighting:
         raise ConfigError(f"{profile['file']}: {exc}") from None
 
 
-def config_intensity(config: VibsynthConfig | Any) -> IntensityWeighting:
-    """What the intensity knob's level means for the config's ``actuator:`` (explicit points: the paper's band)."""
-    actuator = settings_of(config).actuator
+def config_intensity(actuator: Actuator) -> IntensityWeighting:
+    """What the intensity knob's level means for the typed ``actuator:`` section (explicit points: the paper's band)."""
     if actuator.response is not None or actuator.profile is None:
         return PAPER_WEIGHTING
     return profile_intensity(actuator.profile)
 
 
-def resolve_actuator_absolute(config: VibsynthConfig | Any) -> bool:
-    """Whether the response :func:`resolve_actuator_response` gives is a measured (absolute) profile's."""
-    actuator = settings_of(config).actuator
+def resolve_actuator_absolute(actuator: Actuator) -> bool:
+    """Whether the response :func:`resolve_actuator_response` gives for ``actuator:`` is a measured profile's."""
     if actuator.response is not None or actuator.profile is None:
         return False
     return bool(load_actuator_profile(actuator.profile)["absolute"])
 
 
-def resolve_actuator_response(config: VibsynthConfig | Any) -> list[tuple[float, float]]:
-    """The actuator response points ``[(Hz, dB), ...]`` to equalise for.
+def resolve_actuator_response(actuator: Actuator) -> list[tuple[float, float]]:
+    """The actuator response points ``[(Hz, dB), ...]`` to equalise for, of the typed ``actuator:`` section.
 
     An explicit ``actuator.response`` wins; else the points of ``actuator.profile``;
-    else (profile null) an empty list (flat). ``config``: the typed settings, or a config
-    (see :func:`~vibsynth.settings.typed.settings_of`).
+    else (profile null) an empty list (flat).
     """
-    actuator = settings_of(config).actuator
     if actuator.response is not None:
         return [(float(hz), float(db)) for hz, db in actuator.response]
     if actuator.profile is None:

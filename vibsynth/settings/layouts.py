@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 from pydantic import BeforeValidator, ConfigDict
 from pydantic_core import PydanticCustomError
@@ -37,7 +37,6 @@ from vibsynth.settings.models_config import (
     check_layout,
 )
 from vibsynth.settings.paths import user_config_file
-from vibsynth.settings.typed import settings_of
 from vibsynth.settings.validation import did_you_mean, model_spec, validate
 from vibsynth.settings.yamldoc import read_yaml_file
 
@@ -160,12 +159,11 @@ def load_layout(name: str) -> LayoutFileModel:
     return read_layout_file(files[name], name)
 
 
-def resolve_layout(config: VibsynthConfig | Any) -> Layout | None:
-    """The config's layout with every position (a named layout's file is read), or None without one.
+def resolve_layout(value: str | Mapping[int, ChannelPosition] | None) -> Layout | None:
+    """The typed ``layout`` setting with every position (a named layout's file is read), or None without one.
 
-    ``config``: the typed settings, or a config (see :func:`~vibsynth.settings.typed.settings_of`).
+    ``value``: ``settings.layout``, a layout name or the inline positions.
     """
-    value = settings_of(config).layout
     if value is None:
         return None
     if isinstance(value, str):
@@ -266,14 +264,14 @@ def channel_profiles_problem(config: VibsynthConfig) -> PydanticCustomError | No
     return None
 
 
-def channel_profile_names(config: VibsynthConfig | Any) -> list[str | None]:
+def channel_profile_names(settings: VibsynthConfig) -> list[str | None]:
     """Each output channel's own actuator profile name (0-based list, ``audio.channels`` long).
 
     ``actuator.channel_profiles`` wins (a pattern: ``vest-ch{n}`` -> ``vest-ch1``, ...; a list:
     channel 1 first, shorter lists leave the rest None); else the layout's per-position
-    ``profile``; None = the channel uses ``actuator.profile`` (no trim).
+    ``profile``; None = the channel uses ``actuator.profile`` (no trim). ``settings``: the typed
+    model (it reads ``audio.channels``, ``actuator.channel_profiles`` and ``layout``).
     """
-    settings = settings_of(config)
     channels = settings.audio.channels
     value = settings.actuator.channel_profiles
     if isinstance(value, str):
@@ -281,7 +279,7 @@ def channel_profile_names(config: VibsynthConfig | Any) -> list[str | None]:
     if isinstance(value, list):
         return [value[c] if c < len(value) else None for c in range(channels)]
     names: list[str | None] = [None] * channels
-    layout = resolve_layout(settings)
+    layout = resolve_layout(settings.layout)
     if layout is not None:
         for channel, profile in zip(layout.channels, layout.profiles, strict=True):
             if channel < channels:

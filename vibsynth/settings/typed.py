@@ -1,7 +1,7 @@
 """The typed settings of plain config data: validated against the model, no file read.
 
-Below the loaders (:mod:`~vibsynth.settings.config`, :mod:`~vibsynth.settings.actuators`,
-:mod:`~vibsynth.settings.layouts`), which each take the typed model or a config.
+Below the loader (:mod:`~vibsynth.settings.config`), which builds the model once; everything
+after it takes the model or its sections.
 """
 
 from __future__ import annotations

@@ -98,7 +98,7 @@ def create(
     ConfigError
         The layout names a missing or broken layout file.
     """
-    layout = resolve_layout(settings)
+    layout = resolve_layout(settings.layout)
     if layout is None:
         log.info("no layout in the config: touch sources are off (/vibsynth/source/... answers an error)")
         return None
