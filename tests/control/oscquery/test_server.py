@@ -13,6 +13,7 @@ import aiohttp
 import pytest
 
 from tests.control.oscquery.test_tree import check_node
+from tests.control.websocket_frames import client_frame, close_code, handshake, read_upgrade, server_frames
 from vibsynth.control.osc.codec import decode_packet, encode_message
 from vibsynth.settings.allow_list import parse_allow_list
 
@@ -342,3 +343,106 @@ def test_an_adapter_registers_nodes_and_listeners_get_its_values(server, tree):
 
     asyncio.run(run())
     assert get(server, "/avatar/parameters/ChestL?VALUE") == (200, {"VALUE": [0.5]})
+
+
+# ---------------------------------------------------------------------- RFC 6455 framing (issue 31, finding 7)
+def _wait_refused(server, reason: str) -> int:
+    for _ in range(100):
+        if server.refused().get(reason):
+            break
+        time.sleep(0.02)
+    return server.refused().get(reason, 0)
+
+
+LISTEN = json.dumps({"COMMAND": "LISTEN", "DATA": "/vibsynth/ch/1/intensity"}).encode()
+
+
+@pytest.mark.parametrize("with_handshake", [False, True], ids=["after", "with-the-handshake"])
+def test_an_unmasked_listen_closes_with_1002_and_pushes_nothing(server, ctl, with_handshake):
+    """RFC 6455 5.1: a server MUST close the connection upon a client frame that is not masked.
+
+    Sent after the 101 or in the same write as the handshake (aiohttp feeds such bytes to the
+    reader as the socket is set up), the LISTEN is never read: no value comes back, ever.
+    """
+    import socket
+
+    sock = socket.create_connection(("127.0.0.1", server.port), timeout=5)
+    upgraded = None
+    try:
+        if with_handshake:
+            sock.sendall(handshake(server.port) + client_frame(0x1, LISTEN, mask=False))
+        else:
+            sock.sendall(handshake(server.port))
+            upgraded = read_upgrade(sock)  # the socket is open: the frame reaches the WebSocket's reader
+            sock.sendall(client_frame(0x1, LISTEN, mask=False))
+        frames = server_frames(sock, upgraded)
+    finally:
+        sock.close()
+    assert [op for op, _ in frames] == [0x8], frames  # a close frame only: no value was pushed
+    assert close_code(frames) == 1002
+    assert _wait_refused(server, "unmasked") == 1 and not server.clients
+    assert dict(server.status_pairs())["oscquery_listens"] == 0 and server.pushed == 0
+
+
+def test_a_masked_listen_on_the_same_raw_socket_is_served(server, ctl):
+    """The control of the test above: the same bytes, masked, get the value pushed."""
+    import socket
+
+    sock = socket.create_connection(("127.0.0.1", server.port), timeout=5)
+    try:
+        sock.sendall(handshake(server.port) + client_frame(0x1, LISTEN))
+        sock.settimeout(2)
+        data = b""
+        while b"/vibsynth/ch/1/intensity" not in data:
+            chunk = sock.recv(4096)
+            assert chunk
+            data += chunk
+        sock.sendall(client_frame(0x8, (1000).to_bytes(2, "big")))
+    finally:
+        sock.close()
+    for _ in range(100):  # counted once the send returned, which may be after the bytes arrived
+        if server.pushed:
+            break
+        time.sleep(0.02)
+    assert server.pushed == 1 and not server.refused().get("unmasked")
+
+
+FRAMING_MUSTS = {
+    # RFC 6455 5.2: RSV1-3 MUST be 0 unless an extension defines them (none is negotiated here)
+    "rsv1": ([client_frame(0x1, LISTEN, rsv=4)], 1002, "malformed"),
+    "rsv3": ([client_frame(0x1, LISTEN, rsv=1)], 1002, "malformed"),
+    # 5.5: control frames MUST have a payload of 125 bytes or less and MUST NOT be fragmented
+    "ping-126-bytes": ([client_frame(0x9, b"p" * 126)], 1002, "malformed"),
+    "fragmented-ping": ([client_frame(0x9, b"p", fin=False), client_frame(0x0, b"q")], 1002, "malformed"),
+    # a message is bounded whether it comes in one frame or in fragments (MAX_MESSAGE_BYTES = 16384)
+    "fragmented-over-the-bound": (
+        [client_frame(0x1, b"[" * 9000, fin=False), client_frame(0x0, b"]" * 9000)],
+        1009,
+        "too_large",
+    ),
+    # 5.4: a continuation must continue something
+    "lone-continuation": ([client_frame(0x0, LISTEN)], 1002, "malformed"),
+    # an unmasked frame in the middle of a fragmented message
+    "unmasked-continuation": (
+        [client_frame(0x1, b"{", fin=False), client_frame(0x0, LISTEN[1:], mask=False)],
+        1002,
+        "unmasked",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", FRAMING_MUSTS)
+def test_each_framing_must_closes_the_socket_and_is_counted(server, ctl, case):
+    import socket
+
+    frames, code, reason = FRAMING_MUSTS[case]
+    sock = socket.create_connection(("127.0.0.1", server.port), timeout=5)
+    try:
+        sock.sendall(handshake(server.port) + b"".join(frames))
+        got = server_frames(sock)
+    finally:
+        sock.close()
+    assert [op for op, _ in got] == [0x8], got
+    assert close_code(got) == code
+    assert _wait_refused(server, reason) == 1 and not server.clients
+    assert server.pushed == 0 and dict(server.status_pairs())["oscquery_listens"] == 0

@@ -374,3 +374,21 @@ def test_extensions_that_break_the_contract_are_refused(controller, tmp_path):
     server = StudioServer(controller, port=0, extensions=[StudioExtension("demo", "Demo", script, outside)])
     with pytest.raises(ConfigError, match=r"outside /ext/demo/: /api/evil"):
         server.start()
+
+
+def test_an_unmasked_page_frame_closes_the_socket_with_1002_and_is_not_applied(studio, controller):
+    """RFC 6455 5.1 (issue 31, finding 7): the studio's socket refuses a client frame without a mask."""
+    import socket
+
+    from tests.control.studio.helpers import origin
+    from tests.control.websocket_frames import client_frame, close_code, handshake, server_frames
+
+    move = json.dumps({"type": "knob", "channel": 1, "name": "intensity", "value": 0.6, "id": 1}).encode()
+    with socket.create_connection(("127.0.0.1", studio.port), timeout=10) as sock:
+        sock.sendall(handshake(studio.port, f"/ws?token={studio.token}", origin(studio)))
+        sock.sendall(client_frame(0x1, move, mask=False))
+        frames = server_frames(sock)
+    assert close_code(frames) == 1002
+    assert b'"ack"' not in b"".join(payload for _, payload in frames)  # hello and its like, no answer to the move
+    assert get_json(studio, "/api/status")["studio"]["refused"]["unmasked"] == 1
+    assert controller.state()[0].intensity == 0.0

@@ -18,7 +18,9 @@ as a UDP datagram; its replies come back on the socket.
 Security (as the studio's gate, :mod:`~vibsynth.control.studio.security`): reads need no
 token (the tools that read OSCQuery send none); the ``Host`` header must name an IP address,
 ``localhost`` or the advertised ``.local`` name with our port (a DNS-rebinding page's name is
-refused); a WebSocket with a foreign ``Origin`` is refused; URLs, path depth, messages,
+refused); a WebSocket with a foreign ``Origin`` is refused, and one that breaks RFC 6455's framing
+(a client frame without a mask, reserved bits, an oversized or fragmented control frame) is closed
+with 1002 (:mod:`~vibsynth.control.websocket`); URLs, path depth, messages,
 listens, clients and rates are bounded. Every refusal is one clear answer, counted by reason
 (:meth:`OscQueryServer.refused`, ``/status``).
 """
@@ -44,6 +46,7 @@ from vibsynth.control.osc.codec import encode_message
 from vibsynth.control.osc.handler import OscHandler
 from vibsynth.control.oscquery.tree import ATTRIBUTES, Tree
 from vibsynth.control.studio.commands import Throttle
+from vibsynth.control.websocket import StrictWebSocketResponse, UnmaskedFrame
 from vibsynth.errors import VibsynthError
 
 __all__ = [
@@ -239,8 +242,8 @@ class OscQueryServer(LoopServer):
         self.controller.count_error(f"oscquery.{reason}")
 
     def refused(self) -> dict[str, int]:
-        """Refusals so far by reason (host, origin, too_large, too_deep, bad_query, malformed, flood, listens,
-        clients, not_allowed, unknown_path, queue_full)."""
+        """Refusals so far by reason (host, origin, too_large, too_deep, bad_query, malformed, unmasked, flood,
+        listens, clients, not_allowed, unknown_path, queue_full)."""
         with self._lock:
             return dict(self._refused)
 
@@ -379,7 +382,7 @@ class OscQueryServer(LoopServer):
             return self._refuse("origin", 403, "forbidden: WebSocket from another origin")
         if len(self.clients) >= MAX_CLIENTS:
             return self._refuse("clients", 503, f"too many OSCQuery clients (max {MAX_CLIENTS})")
-        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=20.0, compress=False)
+        ws = StrictWebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=20.0, compress=False)
         await ws.prepare(request)
         self._next_id += 1
         client = _Client(ws=ws, ident=self._next_id, remote=request.remote or "")
@@ -392,9 +395,12 @@ class OscQueryServer(LoopServer):
                     self._command(client, msg.data)
                 elif msg.type == WSMsgType.BINARY:
                     self._osc(client, peer, msg.data)
-                elif msg.type == WSMsgType.ERROR:
+                elif msg.type == WSMsgType.ERROR:  # aiohttp has closed it: 1009 too large, 1002 protocol error
                     code = getattr(msg.data, "code", None) or ws.close_code
-                    self.count("too_large" if code == WSCloseCode.MESSAGE_TOO_BIG else "malformed")
+                    if isinstance(msg.data, UnmaskedFrame):
+                        self.count("unmasked")
+                    else:
+                        self.count("too_large" if code == WSCloseCode.MESSAGE_TOO_BIG else "malformed")
                     break
         finally:
             self.clients.discard(client)

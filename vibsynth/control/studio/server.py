@@ -46,6 +46,7 @@ from vibsynth.control.studio.commands import (
 from vibsynth.control.studio.extension import StudioExtension
 from vibsynth.control.studio.hub import Hub, Page
 from vibsynth.control.studio.security import BODY_CAP, Gate, new_token
+from vibsynth.control.websocket import StrictWebSocketResponse, UnmaskedFrame
 from vibsynth.errors import ConfigError, VibsynthError
 
 __all__ = ["StudioServer", "MAX_PAGES", "UPLOAD_PATHS"]
@@ -307,7 +308,7 @@ class StudioServer(LoopServer):
         assert self.hub is not None and self.gate is not None
         if len(self.hub.pages) >= MAX_PAGES:
             return self.gate.refuse("pages", 503, f"too many studio pages open (max {MAX_PAGES}); close one")
-        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=20.0, compress=False)
+        ws = StrictWebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=20.0, compress=False)
         await ws.prepare(request)
         page = self.hub.attach(ws)
         self.hub.send_to(page, ("hello",), self.hello())
@@ -323,9 +324,12 @@ class StudioServer(LoopServer):
                         session.refuse(exc, None, count=False)
                 elif msg.type == WSMsgType.BINARY:
                     session.refuse(MessageError("binary messages are not understood; send JSON text"), None)
-                elif msg.type == WSMsgType.ERROR:
+                elif msg.type == WSMsgType.ERROR:  # aiohttp has closed it: 1009 too large, 1002 protocol error
                     code = getattr(msg.data, "code", None) or ws.close_code
-                    self.gate.count("too_large" if code == WSCloseCode.MESSAGE_TOO_BIG else "malformed")
+                    if isinstance(msg.data, UnmaskedFrame):
+                        self.gate.count("unmasked")
+                    else:
+                        self.gate.count("too_large" if code == WSCloseCode.MESSAGE_TOO_BIG else "malformed")
                     break
         finally:
             session.close()
