@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.e2e.jackutil import REALTIME  # noqa: E402
+from tests.e2e.jackutil import REALTIME, assert_no_collapse  # noqa: E402
 from tests.e2e.oscclient import OscClient as Client  # noqa: E402
 from tests.e2e.oscclient import free_udp_port
 from vibsynth.control.osc.codec import decode_packet, encode_bundle, encode_message, unix_to_ntp
@@ -36,11 +36,9 @@ ROOT = Path(__file__).resolve().parents[2]
 REQUIRED = os.environ.get("VIBSYNTH_E2E_REQUIRED") == "1"
 LOAD_SECONDS = float(os.environ.get("VIBSYNTH_OSC_LOAD_SECONDS", "10"))
 LOAD_RATE = int(os.environ.get("VIBSYNTH_OSC_LOAD_RATE", "10000"))
-# The goal is 0 underflows at 10,000 msg/s; on a 2-core VM we measure 0-2 per 10 s (GIL
-# hand-offs between the receive thread and the audio callback). The bound catches a
-# collapse (an engine that stops keeping up underflows hundreds of times), and the test
-# prints the count for the record.
-MAX_UNDERFLOWS = int(os.environ.get("VIBSYNTH_OSC_LOAD_MAX_UNDERFLOWS", "5"))
+# Underflows under load are the machine's as much as ours (the dummy driver's late wake-ups count
+# too): the tests assert only no collapse (jackutil.assert_no_collapse) and print the count; the
+# distributions beside the server alone and the peers are benchmarks/bench_rt_share.py's.
 START_TIMEOUT_S = 180.0
 
 
@@ -392,7 +390,7 @@ def test_load_10k_messages_per_second(jack_serve):
     )
     assert after["errors"] == before["errors"]
     assert received == sent, f"lost {sent - received} of {sent} messages"
-    assert underflows <= MAX_UNDERFLOWS
+    assert_no_collapse(underflows, elapsed, f"{LOAD_RATE} OSC messages/s")
 
 
 # ---------------------------------------------------------------------- issue 12: patterns and limits
@@ -502,8 +500,9 @@ def test_pathological_patterns_do_not_freeze_serve(limits_serve):
     # a backtracking match takes seconds to forever; a loaded machine slows the plain round trip as much
     bound = 2.0 + 2 * max(plain)
     assert max(times) < bound and get_s < bound
-    assert int(after["frame"]) > int(before["frame"])  # the audio stream kept going
-    assert loaded <= baseline + MAX_UNDERFLOWS
+    frames = int(after["frame"]) - int(before["frame"])
+    assert frames > 0  # the audio stream kept going
+    assert_no_collapse(loaded, frames / rate, "pathological patterns answered")
 
 
 def test_cidr_allow_list_starts_serve(limits_serve):
@@ -596,7 +595,7 @@ def _underflows_quiet(client: Client, seconds: float) -> int:
 @REALTIME
 def test_hundred_thousand_timetagged_bundles(jack_serve):
     """100,000 bundles inside the horizon: 10,000 wait (the default cap), the rest get an error
-    reply each, and the audio keeps its quiet-baseline underflow count (was >1000 underflows)."""
+    reply each, and the audio does not collapse (it underflowed >1000 times before the cap)."""
     port = jack_serve
     client = Client(port)  # queries; the flood comes from its own socket, which the error replies fill
     flood = Client(port)
@@ -615,6 +614,7 @@ def test_hundred_thousand_timetagged_bundles(jack_serve):
         flood_s = time.perf_counter() - t0
         client.request("/vibsynth/sync", 1, expect="/vibsynth/synced", timeout=30.0)
         during = client.status()
+        window_s = (during["frame"] - before["frame"]) / during["rate"]
         loaded = during["underflows"] - before["underflows"]
     finally:
         client.close()
@@ -628,7 +628,7 @@ def test_hundred_thousand_timetagged_bundles(jack_serve):
     bundles = during["scheduled"] - before["scheduled"]
     assert bundles == sent  # none lost in the socket
     assert refused == sent - 10_000
-    assert loaded <= baseline + MAX_UNDERFLOWS
+    assert_no_collapse(loaded, window_s, "100,000 timetagged bundles")  # the defect was >1000 in seconds
 
 
 def test_liblo_oscsend_over_tcp_reaches_the_engine(limits_serve):
