@@ -45,6 +45,14 @@
  * Arithmetic: every operation, and its order, is that of the numpy engine this replaced
  * (double controls, float32 crossfade), so block-by-block output equals one-shot output
  * exactly and the knob semantics are unchanged. Build with -ffp-contract=off.
+ *
+ * Hostile callers: a Core is initialised once (a second __init__ raises RuntimeError, a failed
+ * one changes nothing), every method checks that it was (RuntimeError "Core is not
+ * initialised"), and every argument is validated where it enters (TypeError/ValueError naming
+ * it): push() refuses non-finite values and out-of-range glides, __init__ non-finite or
+ * out-of-range settings. The audio thread converts seconds to samples only through
+ * samples_of(), which checks before casting, so a C producer cannot cause undefined behaviour
+ * either. The one trusted input is push()'s `ptr`/`length`: the engine's own arrays.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -63,6 +71,11 @@
 #define TAP_FRAMES 65536 /* a power of two */
 #define VOICE_FADE_S 0.005
 #define TRIM_GLIDE_S 0.05
+#define MAX_GLIDE_S 3600.0 /* longest glide or mute fade push()/__init__ accept (limits.GLIDE_MAX_MS is 10 s) */
+#define MAX_FS 1e7         /* highest sample rate __init__ accepts */
+#define MAX_RAMP_SAMPLES ((int64_t)1 << 40) /* samples_of() clamps to this (> MAX_GLIDE_S x MAX_FS) */
+#define MAX_RING (1 << 24)
+#define MAX_SCHEDULE (1 << 24)
 
 enum { R_INTENSITY = 0, R_BALANCE = 1, R_MUTE = 2, R_VOICE = 3, R_TRIM_BAL = 4, R_TRIM_MIX = 5, N_RAMPS = 6 };
 typedef vs_cmd_t cmd_t;
@@ -132,6 +145,7 @@ typedef struct vs_core {
     int identity;
     int colmap[MAXCH];
     PyThread_type_lock plock;
+    int ready; /* __init__ succeeded: set once, last, and never cleared */
 } Core;
 
 /* ------------------------------------------------------------------ time */
@@ -150,6 +164,14 @@ static inline double ramp_at(const ramps_t *r, int c, double step) {
     x = x / r->len[c];
     x = x * r->delta[c];
     return x + r->start[c];
+}
+
+/* A ramp length in samples: x (seconds x rate) rounded; NaN or <= 0 -> 0, huge -> MAX_RAMP_SAMPLES.
+ * Checked before the cast (converting NaN, inf or an out-of-range double to int64_t is undefined). */
+static inline int64_t samples_of(double x) {
+    if (!(x > 0.0)) return 0;
+    if (x >= (double)MAX_RAMP_SAMPLES) return MAX_RAMP_SAMPLES;
+    return (int64_t)nearbyint(x);
 }
 
 static void ramp_move(ramps_t *r, int c, double target, int64_t samples, int64_t frame) {
@@ -223,17 +245,18 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
         ramps_t *r = &c->ramps[cmd->arg == 0 ? R_INTENSITY : R_BALANCE];
         double value = cmd->value;
         int layer = cmd->layer;
-        if (layer < 0 || layer >= VS_LAYERS) break;
+        if (layer < 0 || layer >= VS_LAYERS || !isfinite(value)) break;
         if (cmd->arg == 1) value = fmin(fmax(value, c->bal_lo), c->bal_hi);
         for (int ch = 0; ch < c->channels; ch++) {
             if (!(cmd->mask >> ch & 1)) continue;
             if (c->top[ch] != layer || cmd->seq < c->cancel_seq[ch][layer]) continue;
             double glide = isnan(cmd->glide) ? c->glide_s[ch] : cmd->glide;
-            ramp_move(r, ch, value, (int64_t)nearbyint(glide * fs), frame);
+            ramp_move(r, ch, value, samples_of(glide * fs), frame);
         }
         break;
     }
     case CMD_GLIDE:
+        if (!(cmd->value >= 0.0 && cmd->value <= MAX_GLIDE_S)) break; /* NaN too */
         for (int ch = 0; ch < c->channels; ch++)
             if (cmd->mask >> ch & 1) c->glide_s[ch] = cmd->value;
         break;
@@ -244,7 +267,7 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
             if (!(cmd->mask >> ch & 1)) continue;
             c->muted[ch] = cmd->arg ? 1 : 0;
             double distance = fabs(target - ramp_value(r, ch));
-            ramp_move(r, ch, target, (int64_t)nearbyint(c->mute_fade_s * fs * distance), frame);
+            ramp_move(r, ch, target, samples_of(c->mute_fade_s * fs * distance), frame);
         }
         break;
     }
@@ -252,11 +275,11 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
         STORE_REL(&c->sched_done, c->sched_done + c->heap_len);
         c->heap_len = 0;
         for (int ch = 0; ch < c->channels; ch++) {
-            ramp_move(&c->ramps[R_INTENSITY], ch, 0.0, (int64_t)nearbyint(c->mute_fade_s * fs), frame);
+            ramp_move(&c->ramps[R_INTENSITY], ch, 0.0, samples_of(c->mute_fade_s * fs), frame);
             c->top[ch] = 0;
             if (c->vbuf[ch]) {
                 c->vstop[ch] = 1;
-                ramp_move(&c->ramps[R_VOICE], ch, 0.0, (int64_t)nearbyint(c->mute_fade_s * fs), frame);
+                ramp_move(&c->ramps[R_VOICE], ch, 0.0, samples_of(c->mute_fade_s * fs), frame);
             }
         }
         break;
@@ -272,6 +295,7 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
         break;
     case CMD_VOICE: {
         double glide = isnan(cmd->glide) ? 0.0 : cmd->glide;
+        if (!isfinite(cmd->value)) break;
         for (int ch = 0; ch < c->channels; ch++) {
             if (!(cmd->mask >> ch & 1)) continue;
             if (cmd->ptr) {
@@ -282,15 +306,15 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
                 STORE_REL(&c->vid[ch], cmd->seq);
                 ramp_move(&c->ramps[R_VOICE], ch, cmd->value, 0, frame);
             } else if (c->vbuf[ch] && !c->vstop[ch]) {
-                ramp_move(&c->ramps[R_VOICE], ch, cmd->value, (int64_t)nearbyint(glide * fs), frame);
+                ramp_move(&c->ramps[R_VOICE], ch, cmd->value, samples_of(glide * fs), frame);
             }
         }
         break;
     }
     case CMD_TRIM: {
-        if (cmd->ptr && cmd->ival != c->levels) break;
+        if ((cmd->ptr && cmd->ival != c->levels) || !isfinite(cmd->value)) break;
         double glide = isnan(cmd->glide) ? TRIM_GLIDE_S : cmd->glide;
-        int64_t samples = (int64_t)nearbyint(glide * fs);
+        int64_t samples = samples_of(glide * fs);
         for (int ch = 0; ch < c->channels; ch++) {
             if (!(cmd->mask >> ch & 1)) continue;
             const ramps_t *mix = &c->ramps[R_TRIM_MIX];
@@ -310,7 +334,7 @@ static void apply(Core *c, const cmd_t *cmd, int64_t frame) {
         for (int ch = 0; ch < c->channels; ch++) {
             if (!(cmd->mask >> ch & 1) || !c->vbuf[ch]) continue;
             c->vstop[ch] = 1;
-            ramp_move(&c->ramps[R_VOICE], ch, 0.0, (int64_t)nearbyint(c->vfade), frame);
+            ramp_move(&c->ramps[R_VOICE], ch, 0.0, samples_of(c->vfade), frame);
         }
         break;
     default:
@@ -536,6 +560,7 @@ static int pa_callback(const void *input, void *output, unsigned long frames, co
 /* Any thread; the GIL is not needed. Returns PUSH_*; *seq_out gets the sequence number. */
 static int core_push(Core *c, cmd_t *cmd, int64_t *seq_out) {
     int rc = PUSH_OK;
+    if (!c->ready) return PUSH_NOT_READY;
     PyThread_acquire_lock(c->plock, WAIT_LOCK);
     int64_t tail = c->tail;
     if (tail - LOAD_ACQ(&c->head) >= c->ring_cap) {
@@ -556,6 +581,14 @@ static int core_push(Core *c, cmd_t *cmd, int64_t *seq_out) {
 }
 
 /* ------------------------------------------------------------------ Python type */
+/* 1 (with a RuntimeError) when __init__ has not succeeded: every method and getter checks it,
+ * since such an object (Core.__new__(Core)) has no ring, heap, tap, lock or bank. */
+static int not_ready(const Core *self) {
+    if (self->ready) return 0;
+    PyErr_SetString(PyExc_RuntimeError, "Core is not initialised (its __init__ has not succeeded)");
+    return 1;
+}
+
 static void Core_dealloc(Core *self) {
     if (self->sig.obj) PyBuffer_Release(&self->sig);
     if (self->peaks_buf.obj) PyBuffer_Release(&self->peaks_buf);
@@ -566,6 +599,27 @@ static void Core_dealloc(Core *self) {
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
+/* 0, or -1 with a ValueError naming `name` unless lo <= x <= hi (NaN fails). */
+static int check_range(const char *name, double x, double lo, double hi) {
+    if (x >= lo && x <= hi) return 0;
+    char msg[200];
+    PyOS_snprintf(msg, sizeof msg, "%.60s must be in %g..%g, got %g", name, lo, hi, x);
+    PyErr_SetString(PyExc_ValueError, msg);
+    return -1;
+}
+
+/* 0, or -1 with a ValueError naming `name` unless x is finite. */
+static int check_finite(const char *name, double x) {
+    if (isfinite(x)) return 0;
+    char msg[120];
+    PyOS_snprintf(msg, sizeof msg, "%.60s must be finite, got %g", name, x);
+    PyErr_SetString(PyExc_ValueError, msg);
+    return -1;
+}
+
+/* Once: everything is parsed and validated into locals first and only then stored, so a failed
+ * call leaves the object as it was (uninitialised) and a second one is refused (the audio thread,
+ * an OSC receive loop or a PortAudio stream may use the object meanwhile). */
 static int Core_init(Core *self, PyObject *args, PyObject *kw) {
     static char *names[] = {"signals", "peaks", "balances_lo", "balances_hi", "offsets", "fs", "ceiling_db",
                             "range_db", "glide_s", "mute_fade_s", "limiter_ceiling", "initial_intensity",
@@ -573,48 +627,108 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
     PyObject *sig_obj, *peaks_obj, *offsets;
     double lo, hi, fs, ceiling_db, range_db, glide_s, mute_fade_s, limiter, init_k, init_b;
     Py_ssize_t max_block, ring_cap, sched_cap;
+    if (self->ready) {
+        PyErr_SetString(PyExc_RuntimeError, "Core is already initialised (make a new one)");
+        return -1;
+    }
     if (!PyArg_ParseTupleAndKeywords(args, kw, "OOddOddddddddnnn", names, &sig_obj, &peaks_obj, &lo, &hi, &offsets,
                                      &fs, &ceiling_db, &range_db, &glide_s, &mute_fade_s, &limiter, &init_k, &init_b,
                                      &max_block, &ring_cap, &sched_cap))
         return -1;
-    if (PyObject_GetBuffer(sig_obj, &self->sig, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_ND) < 0) return -1;
-    if (self->sig.ndim != 2 || strcmp(self->sig.format, "f") != 0) {
+    Py_buffer sig, pk;
+    memset(&sig, 0, sizeof sig);
+    memset(&pk, 0, sizeof pk);
+    cmd_t *ring = NULL, *heap = NULL;
+    float *tap = NULL;
+    PyThread_type_lock lock = NULL;
+    int64_t read_idx[MAXCH];
+    int levels = 0;
+    int64_t n = 0;
+    Py_ssize_t nch = 0;
+    if (PyObject_GetBuffer(sig_obj, &sig, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_ND) < 0) goto fail;
+    if (sig.ndim != 2 || strcmp(sig.format, "f") != 0) {
         PyErr_SetString(PyExc_ValueError, "signals must be a C-contiguous float32 array (levels, n)");
-        return -1;
+        goto fail;
     }
-    if (PyObject_GetBuffer(peaks_obj, &self->peaks_buf, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) return -1;
-    self->levels = (int)self->sig.shape[0];
-    self->n = self->sig.shape[1];
-    if (strcmp(self->peaks_buf.format, "d") != 0 || self->peaks_buf.len != (Py_ssize_t)(sizeof(double) * self->levels)) {
+    if (sig.shape[0] < 2 || sig.shape[0] > 4096) {
+        PyErr_SetString(PyExc_ValueError, "signals: levels must be in 2..4096");
+        goto fail;
+    }
+    levels = (int)sig.shape[0];
+    n = sig.shape[1];
+    if (PyObject_GetBuffer(peaks_obj, &pk, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) goto fail;
+    if (strcmp(pk.format, "d") != 0 || pk.len != (Py_ssize_t)(sizeof(double) * (size_t)levels)) {
         PyErr_SetString(PyExc_ValueError, "peaks must be float64 of shape (levels,)");
-        return -1;
+        goto fail;
     }
-    if (self->levels < 2 || self->levels > 4096) {
-        PyErr_SetString(PyExc_ValueError, "levels must be in 2..4096");
-        return -1;
+    if (check_finite("balances_lo", lo) < 0 || check_finite("balances_hi", hi) < 0) goto fail;
+    if (!(lo < hi)) {
+        PyErr_SetString(PyExc_ValueError, "balances_lo must be < balances_hi");
+        goto fail;
     }
-    Py_ssize_t nch = PySequence_Length(offsets);
+    nch = PySequence_Length(offsets);
+    if (nch < 0) goto fail;
     if (nch < 1 || nch > MAXCH) {
-        PyErr_Format(PyExc_ValueError, "channels must be in 1..%d", MAXCH);
-        return -1;
+        PyErr_Format(PyExc_ValueError, "offsets: channels must be in 1..%d", MAXCH);
+        goto fail;
     }
-    if (ring_cap < 2 || (ring_cap & (ring_cap - 1)) || sched_cap < 1 || max_block < 1 || max_block >= self->n) {
-        PyErr_SetString(PyExc_ValueError, "bad ring/schedule capacity or max_block");
-        return -1;
+    if (check_range("fs", fs, 0.0, MAX_FS) < 0) goto fail;
+    if (fs == 0.0) {
+        PyErr_SetString(PyExc_ValueError, "fs must be > 0");
+        goto fail;
     }
-    self->flat = (const float *)self->sig.buf;
-    self->peaks = (const double *)self->peaks_buf.buf;
-    for (int i = 0; i < self->levels - 1; i++) self->dpeaks[i] = self->peaks[i + 1] - self->peaks[i];
-    self->dpeaks[self->levels - 1] = 0.0;
+    if (check_finite("ceiling_db", ceiling_db) < 0 || check_finite("range_db", range_db) < 0 ||
+        check_range("glide_s", glide_s, 0.0, MAX_GLIDE_S) < 0 ||
+        check_range("mute_fade_s", mute_fade_s, 0.0, MAX_GLIDE_S) < 0 ||
+        check_finite("limiter_ceiling", limiter) < 0 || check_range("limiter_ceiling", limiter, 0.0, HUGE_VAL) < 0 ||
+        check_finite("initial_intensity", init_k) < 0 || check_finite("initial_balance", init_b) < 0)
+        goto fail;
+    if (max_block < 1 || max_block >= n) {
+        PyErr_SetString(PyExc_ValueError, "max_block must be in 1..n-1 (n = samples of a level)");
+        goto fail;
+    }
+    if (ring_cap < 2 || ring_cap > MAX_RING || (ring_cap & (ring_cap - 1))) {
+        PyErr_Format(PyExc_ValueError, "ring_capacity must be a power of two in 2..%d", MAX_RING);
+        goto fail;
+    }
+    if (sched_cap < 1 || sched_cap > MAX_SCHEDULE) {
+        PyErr_Format(PyExc_ValueError, "schedule_capacity must be in 1..%d", MAX_SCHEDULE);
+        goto fail;
+    }
+    for (Py_ssize_t ch = 0; ch < nch; ch++) {
+        PyObject *o = PySequence_GetItem(offsets, ch);
+        if (!o) goto fail;
+        long long off = PyLong_AsLongLong(o);
+        Py_DECREF(o);
+        if (off == -1 && PyErr_Occurred()) goto fail;
+        read_idx[ch] = ((off % n) + n) % n;
+    }
+    ring = PyMem_RawCalloc((size_t)ring_cap, sizeof(cmd_t));
+    heap = PyMem_RawCalloc((size_t)sched_cap, sizeof(cmd_t));
+    tap = PyMem_RawCalloc((size_t)TAP_FRAMES * (size_t)nch, sizeof(float));
+    lock = PyThread_allocate_lock();
+    if (!ring || !heap || !tap || !lock) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    /* Nothing below fails: store it all. */
+    self->sig = sig;
+    self->peaks_buf = pk;
+    self->levels = levels;
+    self->n = n;
+    self->flat = (const float *)sig.buf;
+    self->peaks = (const double *)pk.buf;
+    for (int i = 0; i < levels - 1; i++) self->dpeaks[i] = self->peaks[i + 1] - self->peaks[i];
+    self->dpeaks[levels - 1] = 0.0;
     self->channels = (int)nch;
     self->fs = fs;
     double ln10_20 = log(10.0) / 20.0;
     self->gain_a = range_db * ln10_20;
     self->gain_b = (ceiling_db - range_db) * ln10_20;
-    self->pos_scale = (double)(self->levels - 1) / (hi - lo);
+    self->pos_scale = (double)(levels - 1) / (hi - lo);
     self->pos_offset = -lo * self->pos_scale;
-    self->pos_max = (double)(self->levels - 1);
-    self->idx_max = (double)(self->levels - 2);
+    self->pos_max = (double)(levels - 1);
+    self->idx_max = (double)(levels - 2);
     self->bal_lo = lo;
     self->bal_hi = hi;
     self->limiter = limiter;
@@ -632,12 +746,7 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
             self->ramps[k].len[ch] = 1.0;
         }
         self->glide_s[ch] = glide_s;
-        PyObject *o = PySequence_GetItem(offsets, ch);
-        if (!o) return -1;
-        long long off = PyLong_AsLongLong(o);
-        Py_DECREF(o);
-        if (off == -1 && PyErr_Occurred()) return -1;
-        self->read_idx[ch] = ((off % self->n) + self->n) % self->n;
+        self->read_idx[ch] = read_idx[ch];
         self->colmap[ch] = ch;
     }
     self->dev_channels = self->channels;
@@ -645,18 +754,24 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
     self->ring_cap = ring_cap;
     self->sched_cap = sched_cap;
     self->vfade = fmax(1.0, nearbyint(VOICE_FADE_S * fs));
-    self->ring = PyMem_RawCalloc((size_t)ring_cap, sizeof(cmd_t));
-    self->heap = PyMem_RawCalloc((size_t)sched_cap, sizeof(cmd_t));
-    self->tap = PyMem_RawCalloc((size_t)TAP_FRAMES * (size_t)self->channels, sizeof(float));
-    self->plock = PyThread_allocate_lock();
-    if (!self->ring || !self->heap || !self->tap || !self->plock) {
-        PyErr_NoMemory();
-        return -1;
-    }
+    self->ring = ring;
+    self->heap = heap;
+    self->tap = tap;
+    self->plock = lock;
+    self->ready = 1;
     return 0;
+fail:
+    if (sig.obj) PyBuffer_Release(&sig);
+    if (pk.obj) PyBuffer_Release(&pk);
+    PyMem_RawFree(ring);
+    PyMem_RawFree(heap);
+    PyMem_RawFree(tap);
+    if (lock) PyThread_free_lock(lock);
+    return -1;
 }
 
 static PyObject *Core_push(Core *self, PyObject *args) {
+    if (not_ready(self)) return NULL;
     cmd_t cmd;
     memset(&cmd, 0, sizeof cmd);
     unsigned long long mask, ptr = 0;
@@ -665,8 +780,37 @@ static PyObject *Core_push(Core *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "iiddKL|iKL", &cmd.kind, &cmd.arg, &cmd.value, &cmd.glide, &mask, &at, &layer, &ptr,
                           &ival))
         return NULL;
-    if (layer < 0 || layer >= VS_LAYERS || ival < 0) {
-        PyErr_SetString(PyExc_ValueError, "layer out of range or negative length");
+    if (cmd.kind < CMD_KNOB || cmd.kind > CMD_TRIM) {
+        PyErr_Format(PyExc_ValueError, "kind must be one of the CMD_* constants, got %d", cmd.kind);
+        return NULL;
+    }
+    if (layer < 0 || layer >= VS_LAYERS) {
+        PyErr_Format(PyExc_ValueError, "layer must be in 0..%d, got %d", VS_LAYERS - 1, layer);
+        return NULL;
+    }
+    if (cmd.kind == CMD_KNOB && cmd.arg != 0 && cmd.arg != 1) {
+        PyErr_Format(PyExc_ValueError, "arg must be 0 (intensity) or 1 (balance) for CMD_KNOB, got %d", cmd.arg);
+        return NULL;
+    }
+    if ((cmd.kind == CMD_LAYER || cmd.kind == CMD_CANCEL) && (cmd.arg < 0 || cmd.arg >= VS_LAYERS)) {
+        PyErr_Format(PyExc_ValueError, "arg must be a layer in 0..%d, got %d", VS_LAYERS - 1, cmd.arg);
+        return NULL;
+    }
+    if (check_finite("value", cmd.value) < 0) return NULL;
+    if (cmd.kind == CMD_GLIDE && check_range("value (glide seconds)", cmd.value, 0.0, MAX_GLIDE_S) < 0) return NULL;
+    /* NaN = the default glide; anything else becomes glide x fs samples on the audio thread */
+    if (!isnan(cmd.glide) && check_range("glide", cmd.glide, 0.0, MAX_GLIDE_S) < 0) return NULL;
+    if (at < -1) {
+        PyErr_Format(PyExc_ValueError, "at must be -1 (as soon as possible) or a frame >= 0, got %lld", at);
+        return NULL;
+    }
+    if (ival < 0) {
+        PyErr_Format(PyExc_ValueError, "length must be >= 0, got %lld", ival);
+        return NULL;
+    }
+    if (cmd.kind == CMD_TRIM && ptr && ival != self->levels) {
+        PyErr_Format(PyExc_ValueError, "length must be the bank's levels (%d) for a trim curve, got %lld",
+                     self->levels, ival);
         return NULL;
     }
     cmd.mask = mask;
@@ -681,6 +825,7 @@ static PyObject *Core_push(Core *self, PyObject *args) {
 }
 
 static PyObject *Core_render_into(Core *self, PyObject *arg) {
+    if (not_ready(self)) return NULL;
     Py_buffer view;
     if (PyObject_GetBuffer(arg, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE | PyBUF_ND) < 0) return NULL;
     if (view.ndim != 2 || strcmp(view.format, "f") != 0 || view.shape[1] != self->channels) {
@@ -702,6 +847,7 @@ static PyObject *Core_render_into(Core *self, PyObject *arg) {
 }
 
 static PyObject *Core_set_output_map(Core *self, PyObject *args) {
+    if (not_ready(self)) return NULL;
     int dev_channels;
     PyObject *cols;
     if (!PyArg_ParseTuple(args, "iO", &dev_channels, &cols)) return NULL;
@@ -731,6 +877,7 @@ static PyObject *Core_set_output_map(Core *self, PyObject *args) {
 }
 
 static PyObject *Core_knob_values(Core *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     PyObject *list = PyList_New(self->channels);
     if (!list) return NULL;
     for (int ch = 0; ch < self->channels; ch++) {
@@ -748,6 +895,7 @@ static PyObject *Core_knob_values(Core *self, PyObject *unused) {
 /* Copy the newest `frames` output frames into out (float32 (frames, channels)); returns the stream
  * frame just after the last one copied. Retries when the audio thread overwrote the span mid-copy. */
 static PyObject *Core_read_tap(Core *self, PyObject *arg) {
+    if (not_ready(self)) return NULL;
     Py_buffer view;
     if (PyObject_GetBuffer(arg, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE | PyBUF_ND) < 0) return NULL;
     int64_t frames = view.ndim == 2 ? view.shape[0] : -1;
@@ -781,6 +929,7 @@ static PyObject *Core_read_tap(Core *self, PyObject *arg) {
 
 /* (balance offset, trim gain at the bank position of balance 0 + offset) per channel, as the audio thread has them. */
 static PyObject *Core_trim_values(Core *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     PyObject *list = PyList_New(self->channels);
     if (!list) return NULL;
     for (int ch = 0; ch < self->channels; ch++) {
@@ -800,6 +949,7 @@ static PyObject *Core_trim_values(Core *self, PyObject *unused) {
 
 /* Sequence number of the voice each channel plays (0 = none). */
 static PyObject *Core_voice_ids(Core *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     PyObject *list = PyList_New(self->channels);
     if (!list) return NULL;
     for (int ch = 0; ch < self->channels; ch++) {
@@ -815,6 +965,7 @@ static PyObject *Core_voice_ids(Core *self, PyObject *unused) {
 
 /* The layer driving each channel's knobs, as the audio thread last applied it. */
 static PyObject *Core_layers(Core *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     PyObject *list = PyList_New(self->channels);
     if (!list) return NULL;
     for (int ch = 0; ch < self->channels; ch++) {
@@ -829,12 +980,14 @@ static PyObject *Core_layers(Core *self, PyObject *unused) {
 }
 
 static PyObject *Core_take_peak(Core *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     double peak = self->load_peak;
     self->load_peak = 0.0;
     return PyFloat_FromDouble(peak);
 }
 
 static PyObject *Core_add_underflows(Core *self, PyObject *arg) {
+    if (not_ready(self)) return NULL;
     long long n = PyLong_AsLongLong(arg);
     if (n == -1 && PyErr_Occurred()) return NULL;
     FETCH_ADD(&self->underflows, (int64_t)n);
@@ -843,6 +996,7 @@ static PyObject *Core_add_underflows(Core *self, PyObject *arg) {
 
 /* Run the PortAudio callback on a Python buffer (float32 (frames, device_channels)): tests. */
 static PyObject *Core_run_callback(Core *self, PyObject *args) {
+    if (not_ready(self)) return NULL;
     PyObject *arg;
     unsigned long status;
     if (!PyArg_ParseTuple(args, "Ok", &arg, &status)) return NULL;
@@ -863,6 +1017,7 @@ static PyObject *Core_run_callback(Core *self, PyObject *args) {
 
 /* (first frame, adc, current, dac, monotonic s) of the last PortAudio output block, or None. */
 static PyObject *Core_output_stamp(Core *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     int64_t frame;
     double t[4];
     if (!self->has_out_stamp || !vs_stamp_read(&self->out_stamp, &frame, t)) Py_RETURN_NONE;
@@ -870,11 +1025,13 @@ static PyObject *Core_output_stamp(Core *self, PyObject *unused) {
 }
 
 static PyObject *Core_addresses(Core *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     return Py_BuildValue("(KK)", (unsigned long long)(uintptr_t)&pa_callback, (unsigned long long)(uintptr_t)self);
 }
 
 #define INT_GETTER(name, field)                                                                     \
     static PyObject *Core_get_##name(Core *self, void *closure) {                                  \
+        if (not_ready(self)) return NULL;                                                          \
         return PyLong_FromLongLong(LOAD_ACQ(&self->field));                                        \
     }
 INT_GETTER(frame, frame)
@@ -887,15 +1044,24 @@ INT_GETTER(schedule_full, schedule_full)
 INT_GETTER(callbacks, callbacks)
 
 static PyObject *Core_get_pending(Core *self, void *closure) {
+    if (not_ready(self)) return NULL;
     PyThread_acquire_lock(self->plock, WAIT_LOCK);
     int64_t pending = self->sched_submitted - LOAD_ACQ(&self->sched_done);
     PyThread_release_lock(self->plock);
     return PyLong_FromLongLong(pending);
 }
-static PyObject *Core_get_load_last(Core *self, void *c) { return PyFloat_FromDouble(self->load_last); }
-static PyObject *Core_get_load_peak(Core *self, void *c) { return PyFloat_FromDouble(self->load_peak); }
-static PyObject *Core_get_load_avg(Core *self, void *c) { return PyFloat_FromDouble(self->load_avg); }
-static PyObject *Core_get_schedule_capacity(Core *self, void *c) { return PyLong_FromLongLong(self->sched_cap); }
+#define CORE_DOUBLE(name, field)                                                                    \
+    static PyObject *Core_get_##name(Core *self, void *closure) {                                  \
+        if (not_ready(self)) return NULL;                                                          \
+        return PyFloat_FromDouble(self->field);                                                    \
+    }
+CORE_DOUBLE(load_last, load_last)
+CORE_DOUBLE(load_peak, load_peak)
+CORE_DOUBLE(load_avg, load_avg)
+static PyObject *Core_get_schedule_capacity(Core *self, void *c) {
+    if (not_ready(self)) return NULL;
+    return PyLong_FromLongLong(self->sched_cap);
+}
 
 static PyGetSetDef Core_getset[] = {
     {"frame", (getter)Core_get_frame, NULL, "frames rendered since start", NULL},
@@ -950,12 +1116,14 @@ static PyTypeObject CoreType = {
 
 /* C producers (the OSC fast path) reach core_push through this capsule. */
 static int core_channels(Core *c) { return c->channels; }
-static vs_core_api_t core_api = {core_push, core_channels};
+static int core_ready(Core *c) { return c->ready; }
+static vs_core_api_t core_api = {core_push, core_channels, NULL, core_ready};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_core", "vibsynth real-time core", -1, NULL};
 
 PyMODINIT_FUNC PyInit__core(void) {
     if (PyType_Ready(&CoreType) < 0) return NULL;
+    core_api.core_type = &CoreType;
     PyObject *m = PyModule_Create(&module);
     if (!m) return NULL;
     Py_INCREF(&CoreType);

@@ -19,7 +19,7 @@ enum {
     CMD_TRIM = 9    /* ptr/ival = float32 gain curve over the bank levels (NULL = 1), value = balance offset */
 };
 #define VS_LAYERS 4 /* 0 knobs, 1 follow, 2 sources, 3 clip (engine/commands.py LAYER_NAMES) */
-enum { PUSH_OK = 0, PUSH_RING_FULL = 1, PUSH_SCHEDULE_FULL = 2 };
+enum { PUSH_OK = 0, PUSH_RING_FULL = 1, PUSH_SCHEDULE_FULL = 2, PUSH_NOT_READY = 3 /* Core not initialised */ };
 
 typedef struct {
     int32_t kind;
@@ -37,11 +37,20 @@ typedef struct {
 
 struct vs_core;
 
+/*
+ * A user of this API holds a Python object it was given as "the core": before casting it to a
+ * struct vs_core *, it checks PyObject_TypeCheck(obj, (PyTypeObject *)api->core_type) and then
+ * api->ready(core) (an object made by Core.__new__ whose __init__ never succeeded has no ring).
+ */
 typedef struct {
     /* Any thread, GIL not needed. Returns PUSH_*; *seq_out gets the sequence number. */
     int (*push)(struct vs_core *core, vs_cmd_t *cmd, int64_t *seq_out);
     /* Channels of the core. */
     int (*channels)(struct vs_core *core);
+    /* The Core type, a PyTypeObject * (void * so that this header needs no Python.h). */
+    void *core_type;
+    /* 1 if the core's __init__ succeeded (then it stays so until the object is freed), else 0. */
+    int (*ready)(struct vs_core *core);
 } vs_core_api_t;
 
 #define VS_CORE_CAPSULE "vibsynth.engine._core._C_API"

@@ -21,6 +21,10 @@
  * inputBufferAdcTime / currentTime / outputBufferDacTime and the monotonic clock) so a reader
  * can put input frames on the output's clock (the engine core stamps its output blocks the
  * same way), e.g. to measure a loop's latency.
+ *
+ * Hostile callers: a ring is initialised once (a second __init__ raises RuntimeError), every
+ * method and getter checks that it was (RuntimeError "InputRing is not initialised": one made by
+ * InputRing.__new__ has no buffer), and every argument is validated where it enters.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -33,6 +37,8 @@
 #define IN_MAXCH 64
 #define PA_INPUT_UNDERFLOW 0x00000001UL
 #define PA_INPUT_OVERFLOW 0x00000002UL
+#define MAX_DELAY_S 60.0               /* run_callback's longest delay */
+#define MAX_CALLBACK_FRAMES (1 << 26)  /* run_callback's most frames of no input (= the largest capacity) */
 
 typedef struct {
     PyObject_HEAD
@@ -102,6 +108,13 @@ static int input_callback(const void *input, void *output, unsigned long frames,
 }
 
 /* ------------------------------------------------------------------ Python type */
+/* 1 (with a RuntimeError) when __init__ has not succeeded (no buffer: cap, channels 0). */
+static int not_ready(const Ring *self) {
+    if (self->buf) return 0;
+    PyErr_SetString(PyExc_RuntimeError, "InputRing is not initialised (its __init__ has not succeeded)");
+    return 1;
+}
+
 static void Ring_dealloc(Ring *self) {
     PyMem_RawFree(self->buf);
     Py_TYPE(self)->tp_free((PyObject *)self);
@@ -112,11 +125,11 @@ static int Ring_init(Ring *self, PyObject *args, PyObject *kw) {
     int channels;
     Py_ssize_t cap;
     double fs;
-    if (!PyArg_ParseTupleAndKeywords(args, kw, "ind", names, &channels, &cap, &fs)) return -1;
-    if (self->buf) {
+    if (self->buf) { /* the PortAudio callback or a reader may use it meanwhile */
         PyErr_SetString(PyExc_RuntimeError, "InputRing is already initialised");
         return -1;
     }
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "ind", names, &channels, &cap, &fs)) return -1;
     if (channels < 1 || channels > IN_MAXCH) {
         PyErr_Format(PyExc_ValueError, "channels must be in 1..%d", IN_MAXCH);
         return -1;
@@ -155,6 +168,7 @@ static int get_frames(PyObject *obj, Py_buffer *view, int width, int writable, c
 }
 
 static PyObject *Ring_set_input_map(Ring *self, PyObject *args) {
+    if (not_ready(self)) return NULL;
     int dev;
     PyObject *cols;
     if (!PyArg_ParseTuple(args, "iO", &dev, &cols)) return NULL;
@@ -182,6 +196,7 @@ static PyObject *Ring_set_input_map(Ring *self, PyObject *args) {
 
 /* Consumer: copy up to len(out) frames out (oldest first); returns the number copied. */
 static PyObject *Ring_read_into(Ring *self, PyObject *arg) {
+    if (not_ready(self)) return NULL;
     Py_buffer view;
     if (get_frames(arg, &view, self->channels, 1, "out") < 0) return NULL;
     int64_t r = self->rpos;
@@ -190,7 +205,7 @@ static PyObject *Ring_read_into(Ring *self, PyObject *arg) {
     int64_t at = r & (self->cap - 1);
     int64_t first = n < self->cap - at ? n : self->cap - at;
     size_t row = sizeof(float) * (size_t)self->channels;
-    memcpy(view.buf, self->buf + at * self->channels, row * (size_t)first);
+    if (first > 0) memcpy(view.buf, self->buf + at * self->channels, row * (size_t)first);
     if (n > first) memcpy((float *)view.buf + first * self->channels, self->buf, row * (size_t)(n - first));
     STORE_REL(&self->rpos, r + n);
     PyBuffer_Release(&view);
@@ -199,6 +214,7 @@ static PyObject *Ring_read_into(Ring *self, PyObject *arg) {
 
 /* Consumer: drop up to `frames` frames unread (negative: all); returns the number dropped. */
 static PyObject *Ring_skip(Ring *self, PyObject *arg) {
+    if (not_ready(self)) return NULL;
     long long want = PyLong_AsLongLong(arg);
     if (want == -1 && PyErr_Occurred()) return NULL;
     int64_t r = self->rpos;
@@ -211,6 +227,7 @@ static PyObject *Ring_skip(Ring *self, PyObject *arg) {
 /* The producer outside PortAudio (the file feeder, tests): device-layout frames. The GIL is held
  * throughout, so Python producers take turns; never while a PortAudio stream feeds the ring. */
 static PyObject *Ring_write(Ring *self, PyObject *arg) {
+    if (not_ready(self)) return NULL;
     Py_buffer view;
     if (get_frames(arg, &view, self->dev_channels, 0, "frames") < 0) return NULL;
     int64_t before = self->wpos;
@@ -221,9 +238,9 @@ static PyObject *Ring_write(Ring *self, PyObject *arg) {
     return PyLong_FromLongLong(n);
 }
 
-/* Sleep `seconds` (the caller has released the GIL). */
+/* Sleep `seconds`, 0..MAX_DELAY_S (checked by the caller), with the GIL released. */
 static void pause_s(double seconds) {
-    if (seconds <= 0.0) return;
+    if (!(seconds > 0.0 && seconds <= MAX_DELAY_S)) return; /* NaN too: converting it to an integer is undefined */
 #ifdef _WIN32
     Sleep((DWORD)(seconds * 1000.0));
 #else
@@ -235,17 +252,25 @@ static void pause_s(double seconds) {
 /* Run the PortAudio callback on a float32 (frames, device_channels) block, or on `frames` frames
  * of no input (an int: PortAudio's NULL input), after `delay` seconds without the GIL: tests. */
 static PyObject *Ring_run_callback(Ring *self, PyObject *args) {
+    if (not_ready(self)) return NULL;
     PyObject *block;
     unsigned long status = 0;
     double delay = 0.0;
     vs_pa_time_t ti = {0.0, 0.0, 0.0};
     if (!PyArg_ParseTuple(args, "O|kdddd", &block, &status, &ti.input_adc, &ti.current, &ti.output_dac, &delay))
         return NULL;
+    if (!(delay >= 0.0 && delay <= MAX_DELAY_S)) {
+        char msg[120];
+        PyOS_snprintf(msg, sizeof msg, "delay must be in 0..%g s, got %g", MAX_DELAY_S, delay);
+        PyErr_SetString(PyExc_ValueError, msg);
+        return NULL;
+    }
     int rc;
     if (PyLong_Check(block)) {
         long long frames = PyLong_AsLongLong(block);
-        if (frames < 0) {
-            if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "frames must be >= 0");
+        if (frames < 0 || frames > MAX_CALLBACK_FRAMES) {
+            if (!PyErr_Occurred())
+                PyErr_Format(PyExc_ValueError, "block: frames must be in 0..%d, got %lld", MAX_CALLBACK_FRAMES, frames);
             return NULL;
         }
         Py_BEGIN_ALLOW_THREADS
@@ -265,11 +290,13 @@ static PyObject *Ring_run_callback(Ring *self, PyObject *args) {
 }
 
 static PyObject *Ring_addresses(Ring *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     return Py_BuildValue("(KK)", (unsigned long long)(uintptr_t)&input_callback, (unsigned long long)(uintptr_t)self);
 }
 
 /* (first frame, adc time, current time, dac time, monotonic s) of the last callback, or None. */
 static PyObject *Ring_stamp(Ring *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     int64_t frame;
     double t[4];
     if (!self->has_stamp || !vs_stamp_read(&self->stamp, &frame, t)) Py_RETURN_NONE;
@@ -277,6 +304,7 @@ static PyObject *Ring_stamp(Ring *self, PyObject *unused) {
 }
 
 static PyObject *Ring_take_peaks(Ring *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     PyObject *list = PyList_New(self->channels);
     if (!list) return NULL;
     for (int ch = 0; ch < self->channels; ch++) {
@@ -293,13 +321,17 @@ static PyObject *Ring_take_peaks(Ring *self, PyObject *unused) {
 }
 
 static PyObject *Ring_take_load_peak(Ring *self, PyObject *unused) {
+    if (not_ready(self)) return NULL;
     double peak = self->load_peak;
     self->load_peak = 0.0;
     return PyFloat_FromDouble(peak);
 }
 
 #define RING_INT(name, expr)                                                                       \
-    static PyObject *Ring_get_##name(Ring *self, void *closure) { return PyLong_FromLongLong(expr); }
+    static PyObject *Ring_get_##name(Ring *self, void *closure) {                                  \
+        if (not_ready(self)) return NULL;                                                          \
+        return PyLong_FromLongLong(expr);                                                          \
+    }
 RING_INT(channels, self->channels)
 RING_INT(device_channels, self->dev_channels)
 RING_INT(capacity, self->cap)
@@ -312,10 +344,15 @@ RING_INT(overflows, LOAD_ACQ(&self->overflows))
 RING_INT(input_overflows, LOAD_ACQ(&self->pa_overflows))
 RING_INT(input_underflows, LOAD_ACQ(&self->pa_underflows))
 RING_INT(callbacks, LOAD_ACQ(&self->callbacks))
-static PyObject *Ring_get_fs(Ring *self, void *c) { return PyFloat_FromDouble(self->fs); }
-static PyObject *Ring_get_load_last(Ring *self, void *c) { return PyFloat_FromDouble(self->load_last); }
-static PyObject *Ring_get_load_peak(Ring *self, void *c) { return PyFloat_FromDouble(self->load_peak); }
-static PyObject *Ring_get_load_avg(Ring *self, void *c) { return PyFloat_FromDouble(self->load_avg); }
+#define RING_DOUBLE(name, field)                                                                    \
+    static PyObject *Ring_get_##name(Ring *self, void *closure) {                                  \
+        if (not_ready(self)) return NULL;                                                          \
+        return PyFloat_FromDouble(self->field);                                                    \
+    }
+RING_DOUBLE(fs, fs)
+RING_DOUBLE(load_last, load_last)
+RING_DOUBLE(load_peak, load_peak)
+RING_DOUBLE(load_avg, load_avg)
 
 static PyGetSetDef Ring_getset[] = {
     {"channels", (getter)Ring_get_channels, NULL, "channels of a ring frame", NULL},

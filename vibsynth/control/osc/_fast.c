@@ -27,6 +27,18 @@
  * into a log of MAX_SEEN entries handed to on_state as `seen` [(datagram, (host, port), unix
  * time), ...] in arrival order (a full log is handed over at once: nothing is dropped). So a
  * monitor shows what was sent (`/vibsynth/intensity f 0.3`), not the channels it moved.
+ *
+ * Hostile callers: `core` must be an initialised vibsynth.engine._core.Core (checked against the
+ * type the core's capsule exports: TypeError otherwise) or None; a Receiver is initialised once
+ * (a second __init__ raises RuntimeError: run() may be using it on another thread), and run(),
+ * stop() and counters() refuse one whose __init__ has not succeeded.
+ *
+ * Receive errors: EINTR is retried, EAGAIN ends the batch; errors a working UDP socket can report
+ * (an ICMP error for an earlier reply, a lack of buffers: recv_error_kind) are counted
+ * (counters()["recv_errors"]) and retried after a growing nap, and run() raises OSError after
+ * MAX_RECV_ERRORS of them in a row; any other error (not a socket, a closed descriptor) makes
+ * run() raise OSError at once. So run() never spins on a persistent error, and stop() is always
+ * honoured within POLL_MS.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -63,6 +75,7 @@ typedef int sock_t;
 #define POLL_MS 100
 #define MAX_SEEN 256
 #define SEEN_DATAGRAM 160 /* > the longest fast-path datagram: 128 (address) + 4 (",dd") + 16 */
+#define MAX_RECV_ERRORS 64 /* run() raises after this many receive errors in a row (no datagram between) */
 
 enum { M_INTENSITY = 1, M_BALANCE = 2, M_TEXTURE = 3 };
 
@@ -112,7 +125,7 @@ typedef struct {
     int64_t last_seq;
     double last_flush;
     /* counters */
-    long long packets, bytes, fast, slow, denied, ring_full, handler_errors;
+    long long packets, bytes, fast, slow, denied, ring_full, handler_errors, recv_errors;
     /* buffers */
     uint8_t *scratch;
     uint8_t *arena;
@@ -120,6 +133,7 @@ typedef struct {
     int n_slow;
     size_t slow_off[MAX_BATCH], slow_len[MAX_BATCH];
     struct sockaddr_storage slow_addr[MAX_BATCH];
+    int ready; /* __init__ succeeded: set once, last, and never cleared */
 } Receiver;
 
 static double now_s(void) {
@@ -396,14 +410,87 @@ fail:
 }
 
 /* ------------------------------------------------------------------ the loop */
+enum { RX_RETRY, RX_WAIT, RX_TRANSIENT, RX_FATAL };
+
+static int sock_errno(void) {
+#ifdef _WIN32
+    return WSAGetLastError();
+#else
+    return errno;
+#endif
+}
+
+/* What a receive error means: retry now, no datagram waiting, a passing error (count it, nap,
+ * retry), or one that will not pass (not a socket, closed, invalid). */
+static int recv_error_kind(int err) {
+#ifdef _WIN32
+    switch (err) {
+    case WSAEINTR: return RX_RETRY;
+    case WSAEWOULDBLOCK: return RX_WAIT;
+    case WSAECONNRESET: /* an ICMP port unreachable for an earlier reply */
+    case WSAENETRESET:
+    case WSAEMSGSIZE:
+    case WSAENOBUFS:
+    case WSAETIMEDOUT: return RX_TRANSIENT;
+    default: return RX_FATAL;
+    }
+#else
+    if (err == EINTR) return RX_RETRY;
+    if (err == EAGAIN || err == EWOULDBLOCK) return RX_WAIT;
+    switch (err) {
+    case ECONNREFUSED: /* an ICMP error for an earlier reply (connected sockets, IP_RECVERR) */
+    case ECONNRESET:
+    case EHOSTUNREACH:
+    case ENETUNREACH:
+    case ETIMEDOUT:
+    case ENOMEM:
+    case ENOBUFS: return RX_TRANSIENT;
+    default: return RX_FATAL;
+    }
+#endif
+}
+
+/* Sleep `ms` milliseconds (GIL released). */
+static void nap_ms(int ms) {
+#ifdef _WIN32
+    Sleep((DWORD)ms);
+#else
+    struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
+    nanosleep(&ts, NULL);
+#endif
+}
+
+static void set_os_error(int err) {
+#ifdef _WIN32
+    PyErr_SetExcFromWindowsErr(PyExc_OSError, err);
+#else
+    errno = err;
+    PyErr_SetFromErrno(PyExc_OSError);
+#endif
+}
+
+/* 1 (with a RuntimeError) when __init__ has not succeeded. */
+static int not_ready(const Receiver *r) {
+    if (r->ready) return 0;
+    PyErr_SetString(PyExc_RuntimeError, "Receiver is not initialised (its __init__ has not succeeded)");
+    return 1;
+}
+
 static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
+    if (not_ready(r)) return NULL;
     if (r->running) {
         PyErr_SetString(PyExc_RuntimeError, "already running");
         return NULL;
     }
     r->running = 1;
+    int err = 0;         /* the error that ends run() (0: stop()) */
+    int consecutive = 0; /* receive errors since the last datagram */
     PyThreadState *ts = PyEval_SaveThread();
     while (!r->stop) {
+        if (consecutive) { /* a passing error: let it pass (1, 2, ... POLL_MS ms) before trying again */
+            nap_ms(consecutive < POLL_MS ? consecutive : POLL_MS);
+            if (r->stop) break;
+        }
         struct pollfd pfd = {r->fd, POLLIN, 0};
         int wait_ms = POLL_MS;
         if (r->any_dirty || r->n_seen) { /* wake up in time to hand them over within STATE_PERIOD_S */
@@ -412,6 +499,22 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
         }
         int ready = poll(&pfd, 1, wait_ms);
         if (r->stop) break;
+        if (ready < 0) {
+            int e = sock_errno();
+            if (recv_error_kind(e) == RX_RETRY) continue;
+            r->recv_errors++;
+            err = e;
+            break;
+        }
+        if (ready > 0 && (pfd.revents & POLLNVAL)) { /* not an open descriptor */
+            r->recv_errors++;
+#ifdef _WIN32
+            err = WSAENOTSOCK;
+#else
+            err = EBADF;
+#endif
+            break;
+        }
         int batch = 0, to_python = 0;
         if (ready > 0) {
             while (batch < MAX_BATCH) {
@@ -419,16 +522,23 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
                 socklen_t alen = sizeof addr;
 #ifdef _WIN32
                 int n = recvfrom(r->fd, (char *)r->scratch, MAX_DATAGRAM, 0, (struct sockaddr *)&addr, &alen);
-                if (n < 0) break;
 #else
                 ssize_t n = recvfrom(r->fd, r->scratch, MAX_DATAGRAM, MSG_DONTWAIT, (struct sockaddr *)&addr, &alen);
-                if (n < 0) {
-                    if (errno == EINTR) continue;
-                    if (errno == EAGAIN || errno == EWOULDBLOCK) break;
-                    if (errno == EBADF) { r->stop = 1; break; }
-                    continue; /* e.g. ECONNREFUSED for an earlier reply */
-                }
 #endif
+                if (n < 0) {
+                    int e = sock_errno();
+                    int kind = recv_error_kind(e);
+                    if (kind == RX_WAIT) {
+                        consecutive = 0;
+                        break;
+                    }
+                    if (kind == RX_RETRY && ++consecutive < MAX_RECV_ERRORS) continue;
+                    if (kind != RX_RETRY) r->recv_errors++;
+                    if (kind == RX_TRANSIENT && ++consecutive < MAX_RECV_ERRORS) break;
+                    err = e;
+                    break;
+                }
+                consecutive = 0;
                 batch++;
                 r->packets++;
                 r->bytes += n;
@@ -462,6 +572,7 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
                 r->arena_used += (size_t)n;
             }
         }
+        if (err) break;
         if (r->n_slow || ((r->any_dirty || r->n_seen) && now_s() - r->last_flush >= STATE_PERIOD_S)) {
             PyEval_RestoreThread(ts);
             if (r->n_slow)
@@ -472,12 +583,20 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
         }
     }
     PyEval_RestoreThread(ts);
-    flush_state(r);
+    if (r->n_slow)
+        dispatch_slow(r); /* what came before the error, in order (flushes the state first) */
+    else
+        flush_state(r);
     r->running = 0;
+    if (err && !r->stop) { /* after stop() (e.g. a socket closed meanwhile), an error is the end asked for */
+        set_os_error(err);
+        return NULL;
+    }
     Py_RETURN_NONE;
 }
 
 static PyObject *Receiver_stop(Receiver *r, PyObject *unused) {
+    if (not_ready(r)) return NULL;
     r->stop = 1;
     Py_RETURN_NONE;
 }
@@ -488,9 +607,25 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
                             "on_slow", "on_state", "allow", "watch",       NULL};
     long long fd;
     PyObject *core, *table, *on_slow, *on_state, *allow, *watch = Py_None;
+    if (r->ready) { /* run() may be using it on the receive thread */
+        PyErr_SetString(PyExc_RuntimeError, "Receiver is already initialised (make a new one)");
+        return -1;
+    }
     if (!PyArg_ParseTupleAndKeywords(args, kw, "LOOddOOO|O", names, &fd, &core, &table, &r->bal_min, &r->bal_max,
                                      &on_slow, &on_state, &allow, &watch))
         return -1;
+#ifdef _WIN32
+    if (fd < 0) {
+#else
+    if (fd < 0 || fd > INT32_MAX) {
+#endif
+        PyErr_Format(PyExc_ValueError, "fd must be a socket descriptor (>= 0), got %lld", fd);
+        return -1;
+    }
+    if (!PyCallable_Check(on_slow) || !PyCallable_Check(on_state)) {
+        PyErr_SetString(PyExc_TypeError, "on_slow and on_state must be callable");
+        return -1;
+    }
     if (r->watch_view.obj) PyBuffer_Release(&r->watch_view);
     r->watch = NULL;
     r->n_seen = 0;
@@ -508,10 +643,20 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
     r->core_ptr = NULL;
     r->channels = 0;
     if (core != Py_None) { /* None: no fast path, every datagram goes to Python */
-        r->api = (const vs_core_api_t *)PyCapsule_Import(VS_CORE_CAPSULE, 0);
-        if (!r->api) return -1;
+        const vs_core_api_t *api = (const vs_core_api_t *)PyCapsule_Import(VS_CORE_CAPSULE, 0);
+        if (!api) return -1;
+        if (!api->core_type || !PyObject_TypeCheck(core, (PyTypeObject *)api->core_type)) {
+            PyErr_Format(PyExc_TypeError, "core must be a vibsynth.engine._core.Core or None, not %.100s",
+                         Py_TYPE(core)->tp_name);
+            return -1;
+        }
+        if (!api->ready((struct vs_core *)core)) {
+            PyErr_SetString(PyExc_RuntimeError, "core: the Core is not initialised (its __init__ has not succeeded)");
+            return -1;
+        }
+        r->api = api;
         r->core_ptr = (struct vs_core *)core;
-        r->channels = r->api->channels(r->core_ptr);
+        r->channels = api->channels(r->core_ptr);
     }
     Py_INCREF(core);
     Py_XSETREF(r->core, core);
@@ -535,7 +680,8 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
             return -1;
         }
         Py_DECREF(item);
-        if (!r->api || alen < 1 || alen >= MAX_ADDR || channel >= r->channels || ++count > TABLE_SIZE / 4) {
+        if (!r->api || alen < 1 || alen >= MAX_ADDR || channel < -1 || channel >= r->channels ||
+            ++count > TABLE_SIZE / 4) {
             Py_DECREF(it);
             PyErr_SetString(PyExc_ValueError, "fast-path table: bad address, channel or too many entries");
             return -1;
@@ -583,6 +729,7 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
         PyErr_NoMemory();
         return -1;
     }
+    r->ready = 1;
     return 0;
 }
 
@@ -598,15 +745,19 @@ static void Receiver_dealloc(Receiver *r) {
 }
 
 static PyObject *Receiver_counters(Receiver *r, PyObject *unused) {
-    return Py_BuildValue("{sLsLsLsLsLsLsL}", "packets", r->packets, "bytes", r->bytes, "fast", r->fast, "slow",
+    if (not_ready(r)) return NULL;
+    return Py_BuildValue("{sLsLsLsLsLsLsLsL}", "packets", r->packets, "bytes", r->bytes, "fast", r->fast, "slow",
                          r->slow, "denied", r->denied, "ring_full", r->ring_full, "handler_errors",
-                         r->handler_errors);
+                         r->handler_errors, "recv_errors", r->recv_errors);
 }
 
 static PyMethodDef Receiver_methods[] = {
-    {"run", (PyCFunction)Receiver_run, METH_NOARGS, "receive until stop(); call from the receive thread"},
+    {"run", (PyCFunction)Receiver_run, METH_NOARGS,
+     "receive until stop() (returns None), or until the socket fails (raises OSError); call from the receive "
+     "thread"},
     {"stop", (PyCFunction)Receiver_stop, METH_NOARGS, "ask run() to return (within 100 ms)"},
-    {"counters", (PyCFunction)Receiver_counters, METH_NOARGS, "packets, bytes, fast, slow, denied, ..."},
+    {"counters", (PyCFunction)Receiver_counters, METH_NOARGS,
+     "packets, bytes, fast, slow, denied, ring_full, handler_errors, recv_errors"},
     {NULL}};
 
 static PyTypeObject ReceiverType = {
