@@ -875,6 +875,8 @@ class PyoTarget(Target):
 
 class VibsynthTarget(Target):
     name = "vibsynth"
+    #: Lines added to the ``osc:`` section of its config (a variant's settings).
+    osc_extra = ""
 
     def source(self) -> tuple[Path, str]:
         """The folder vibsynth runs from, and its description."""
@@ -890,7 +892,7 @@ class VibsynthTarget(Target):
         config.write_text(
             "version: 1\n"
             f"audio:\n  host_api: JACK\n  rate: {self.jackd.rate}\n  block_size: {self.jackd.period}\n  channels: 1\n"
-            f"osc:\n  port: {self.port}\n"
+            f"osc:\n  port: {self.port}\n{self.osc_extra}"
             "knobs:\n  glide_ms: 0\n",
             encoding="utf-8",
         )
@@ -955,7 +957,20 @@ class VibsynthRefTarget(VibsynthTarget):
         return self.args.vibsynth_ref.resolve(), f"source folder {self.args.vibsynth_ref.resolve()}"
 
 
-TARGETS = {"scsynth": ScsynthTarget, "pyo": PyoTarget, "vibsynth": VibsynthTarget, "vibsynth-ref": VibsynthRefTarget}
+class VibsynthNoFifoTarget(VibsynthTarget):
+    """vibsynth with its OSC receive loop normally scheduled (``osc.receive_priority: 0``), not SCHED_FIFO."""
+
+    name = "vibsynth-nofifo"
+    osc_extra = "  receive_priority: 0\n"
+
+
+TARGETS = {
+    "scsynth": ScsynthTarget,
+    "pyo": PyoTarget,
+    "vibsynth": VibsynthTarget,
+    "vibsynth-ref": VibsynthRefTarget,
+    "vibsynth-nofifo": VibsynthNoFifoTarget,
+}
 REFERENCE = "vibsynth-ref"
 
 

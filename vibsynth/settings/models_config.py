@@ -245,6 +245,13 @@ class Osc(Section):
     schedule_horizon_s: float = setting(10.0, "bundles timetagged further ahead are rejected", unit="s", gt=0, le=3600)
     notify_rate_hz: float = setting(30.0, "max pushes per second per subscriber", unit="Hz", gt=0, le=1000)
     tcp: bool = setting(False, "also listen on TCP (SLIP framing) on the same port")
+    receive_priority: int = setting(
+        1,
+        "SCHED_FIFO priority of the UDP receive loop on Linux, kept below JACK's audio threads "
+        "(default -P 10); 0 = normally scheduled. Ignored where real-time scheduling is refused or not POSIX",
+        ge=0,
+        le=9,
+    )
     tcp_max_connections: int = setting(64, "open TCP connections in all", ge=1, le=1024)
     tcp_max_per_peer: int = setting(4, "open TCP connections from one client address", ge=1, le=1024)
     tcp_idle_timeout_s: float = setting(

@@ -231,3 +231,25 @@ def test_the_server_banner_says_the_receive_thread_is_real_time():
         assert f"real-time receive thread (SCHED_FIFO {RECEIVE_PRIORITY})" in server.describe()
     finally:
         server.stop()
+
+
+def test_osc_receive_priority_setting_reaches_the_receive_loop():
+    """``osc.receive_priority: 0`` (the setting) gives a normally scheduled receive loop; 9 is the highest."""
+    import argparse
+
+    from vibsynth.control.osc.adapter import create
+    from vibsynth.errors import ConfigError
+    from vibsynth.settings.config import load_config
+
+    settings = load_config(overrides={"osc": {"port": 0, "receive_priority": 0}}).settings
+    server = create(settings, argparse.Namespace(), make_controller())
+    assert server is not None
+    server.start()
+    try:
+        assert server.udp.priority == 0 and not server.udp.realtime
+        assert "real-time receive thread" not in server.describe()
+    finally:
+        server.stop()
+    assert load_config(overrides={"osc": {"receive_priority": 9}}).settings.osc.receive_priority == 9
+    with pytest.raises(ConfigError, match="receive_priority"):
+        load_config(overrides={"osc": {"receive_priority": 10}})

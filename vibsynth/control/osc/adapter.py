@@ -67,6 +67,7 @@ def create(
         schedule_horizon_s=osc.schedule_horizon_s,
         notify_rate_hz=osc.notify_rate_hz,
         tcp=osc.tcp,
+        receive_priority=osc.receive_priority,
         speed_curve=SpeedCurve(speed.curve, speed.balance_per_decade),
         block_size=settings.audio.block_size,
         tcp_max_connections=osc.tcp_max_connections,

@@ -16,6 +16,7 @@ from vibsynth.control.osc.speed import SpeedCurve
 from vibsynth.control.osc.tables import register_tables
 from vibsynth.control.osc.transport import (
     DEFAULT_RCVBUF,
+    RECEIVE_PRIORITY,
     TCP_IDLE_TIMEOUT_S,
     TCP_MAX_CONNECTIONS,
     TCP_MAX_PER_PEER,
@@ -39,6 +40,8 @@ class OscServer:
     host, port : str, int
     prefix, allow, reply_port, schedule_horizon_s, notify_rate_hz, tcp, speed_curve
         See the ``osc:`` config section and docs/osc.md.
+    receive_priority : int
+        SCHED_FIFO priority of the UDP receive loop (0 = normally scheduled; ``osc.receive_priority``).
     tcp_max_connections, tcp_max_per_peer, tcp_idle_timeout_s
         TCP connection limits (see :class:`~vibsynth.control.osc.transport.TcpTransport`).
     block_size : int, optional
@@ -59,6 +62,7 @@ class OscServer:
         schedule_horizon_s: float = 10.0,
         notify_rate_hz: float = 30.0,
         tcp: bool = False,
+        receive_priority: int = RECEIVE_PRIORITY,
         speed_curve: SpeedCurve | None = None,
         block_size: int | None = None,
         rcvbuf: int = DEFAULT_RCVBUF,
@@ -95,6 +99,7 @@ class OscServer:
             reply_port=reply_port,
             rcvbuf=rcvbuf,
             stats=self.stats,
+            priority=receive_priority,
             receiver_factory=partial(make_receiver, controller=controller, space=self.handler.space, tap=self.tap),
         )
         self.tcp = (
