@@ -12,6 +12,9 @@ export PYTHONDONTWRITEBYTECODE=1
 .venv/bin/ruff check vibsynth tests benchmarks scripts
 .venv/bin/ruff format --check --quiet vibsynth tests benchmarks scripts
 .venv/bin/mypy
+# The science, the engine and the settings by mypy's own --strict (imports of the layers above, reached
+# through the package's face, are read for their types; their findings belong to the line above).
+.venv/bin/mypy --strict --follow-imports=silent --cache-dir .mypy_cache/strict vibsynth/dsp vibsynth/engine vibsynth/settings
 if [ $# -gt 0 ]; then
   exec scripts/with_jack.sh -- .venv/bin/python -m pytest -q -ra "$@"
 fi
