@@ -197,3 +197,32 @@ def test_a_measured_iso_curve_moves_the_band_and_keeps_the_response(tmp_path):
     with pytest.raises(ParameterError):
         apply_iso_curve(path, [100.0], [0.0], source="x")
     assert read_actuator_profile(path).band_hz == after.band_hz  # a bad curve wrote nothing
+
+
+def test_a_response_lost_mid_sweep_is_named_instead_of_the_noise():
+    # the case: the actuator's signal gone 0.5 s into the second sweep; the noise did not change
+    y = recording(noise=1e-3)
+    b, a = voice_coil()
+    at = PLAN.starts()[1] + 100 + int(0.5 * FS)
+    y[at : 100 + PLAN.stimulus().size] -= signal.lfilter(b, a, PLAN.stimulus())[at - 100 :]
+    m = measure_recording(y, PLAN, max_latency_s=0.45)
+    with pytest.raises(InputError) as exc:
+        check_measurement(m, input_label="system:1", level_dbfs=-12)
+    text = str(exc.value)
+    assert text.startswith("the response on system:1 stopped 0.5 s into sweep 2 of 3 (at 100 Hz) and did not come ")
+    assert "the input or the actuator was lost" in text and "background noise" not in text
+
+
+def test_a_loss_where_the_response_is_too_weak_to_place_is_given_as_an_interval():
+    plan = SweepPlan(fs=FS, seconds=4.0, n_sweeps=3)
+    x = plan.stimulus()
+    b, a = voice_coil()
+    response = np.zeros(x.size + 30000)
+    response[100 : 100 + x.size] = signal.lfilter(b, a, x)
+    response[plan.starts()[1] + 100 + int(0.5 * FS) :] = 0.0  # at 10.6 Hz: 35 dB down on the coil, under the noise
+    y = response + 3.5e-3 * np.random.default_rng(13).standard_normal(response.size)
+    m = measure_recording(y, plan, max_latency_s=0.45)
+    with pytest.raises(
+        InputError, match=r"stopped between 4\.0 s into sweep 1 \(at 2000 Hz\) and 1\.\d s into sweep 2 "
+    ):
+        check_measurement(m, input_label="system:1", level_dbfs=-12)

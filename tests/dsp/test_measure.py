@@ -18,6 +18,8 @@ from vibsynth.dsp.measure import (
     ir_peak,
     measure_recording,
     response_freqs,
+    response_loss,
+    sweep_frequency,
 )
 from vibsynth.errors import ParameterError
 
@@ -175,3 +177,76 @@ def test_majority_spread_and_combination():
     assert combine_sweeps_db(v)[0] == pytest.approx(0.2)
     assert majority_spread_db(v[:2])[0] == pytest.approx(0.2)
     assert combine_sweeps_db(np.array([[0.0], [10 * np.log10(3)]]))[0] == pytest.approx(10 * np.log10(2))
+
+
+def cut(plan: SweepPlan, y: np.ndarray, *, sweep: int, seconds: float, delay: int) -> np.ndarray:
+    """The recording with its response gone (silence, the noise left) from ``seconds`` into ``sweep`` on."""
+    out = y.copy()
+    at = plan.starts()[sweep - 1] + delay + int(round(seconds * FS))
+    b, a = resonance()
+    clean = record(plan, b, a, delay=delay, noise=0.0, seed=0)
+    out[at:] -= clean[at:]  # the same noise, no actuator: a lost cable, not a quieter room
+    return out
+
+
+@pytest.mark.parametrize(
+    ("seconds", "noise", "sweep", "at"),
+    [
+        (1.0, 1e-4, 2, 0.5),  # the issue's case: half a second into the second sweep
+        (1.0, 1e-3, 3, 0.3),
+        (1.0, 1e-3, 2, 0.9),  # near a sweep's top
+        (4.0, 1e-4, 2, 0.5),  # the default sweep: at 10.6 Hz, low on a voice coil's slope
+        (4.0, 1e-4, 1, 2.0),  # in the first sweep: the later sweeps tell what was missed
+    ],
+)
+def test_a_response_lost_mid_sweep_is_found_with_its_sweep_time_and_frequency(seconds, noise, sweep, at):
+    plan = SweepPlan(fs=FS, seconds=seconds, n_sweeps=3)
+    b, a = resonance()
+    delay = 480
+    y = cut(plan, record(plan, b, a, delay=delay, noise=noise, seed=7), sweep=sweep, seconds=at, delay=delay)
+    m = measure_recording(y, plan, max_latency_s=0.45)
+    loss = m.loss
+    assert loss is not None and loss.sweep == sweep, loss
+    assert loss.seconds == pytest.approx(at, abs=0.03)
+    assert loss.freq_hz == pytest.approx(float(sweep_frequency(plan, at)), rel=0.05)
+    assert loss.exact == (sweep > 1)  # a first sweep's loss is known from the next sweep's start on
+    if sweep > 1:
+        assert (loss.missed_sweep, loss.missed_seconds) == pytest.approx((sweep, at), abs=0.05)
+    else:
+        assert loss.missed_sweep == 2
+    assert response_loss(y, plan, m.latency) == loss
+
+
+def test_a_response_too_weak_to_hear_where_it_stopped_is_placed_between_two_points():
+    # Loud noise: the voice coil's 5-20 Hz (30-50 dB down) is under it, so a loss 0.5 s into the second
+    # sweep (10.6 Hz) is known only from where the response should have been heard again.
+    plan = SweepPlan(fs=FS, seconds=4.0, n_sweeps=3)
+    b, a = resonance()
+    y = cut(plan, record(plan, b, a, delay=480, noise=3.5e-3, seed=8), sweep=2, seconds=0.5, delay=480)
+    loss = measure_recording(y, plan, max_latency_s=0.45).loss
+    assert loss is not None and not loss.exact
+    assert loss.sweep == 1 and loss.seconds > 3.5  # heard up to sweep 1's top end
+    assert loss.missed_sweep == 2 and 0.5 < loss.missed_seconds < 2.0  # missed once the coil should be heard
+    assert loss.missed_freq_hz == pytest.approx(float(sweep_frequency(plan, loss.missed_seconds)))
+
+
+def test_no_loss_in_a_whole_a_weak_a_dropped_out_or_a_silent_recording():
+    plan = SweepPlan(fs=FS, seconds=1.0, n_sweeps=3)
+    b, a = resonance()
+    whole = record(plan, b, a, delay=480, noise=1e-3, seed=9)
+    assert measure_recording(whole, plan, max_latency_s=0.45).loss is None
+    # an actuator that gives nothing above 300 Hz: every sweep falls silent at the same point
+    clean = record(plan, b, a, delay=480, noise=0.0, seed=9)
+    top_less = whole - clean + signal.sosfilt(signal.butter(8, 300.0, fs=FS, output="sos"), clean)
+    assert measure_recording(top_less, plan, max_latency_s=0.45).loss is None
+    # 60 ms dropped mid-sweep, then the response is back: not lost
+    dropped = whole.copy()
+    at = plan.starts()[1] + 480 + 24000
+    dropped[at : at + 2880] = 1e-3 * np.random.default_rng(10).standard_normal(2880)
+    assert measure_recording(dropped, plan, max_latency_s=0.45).loss is None
+    # a loss in the last sweep's last 0.1 s: too little missed to tell from its fade
+    end = cut(plan, whole, sweep=3, seconds=0.92, delay=480)
+    assert measure_recording(end, plan, max_latency_s=0.45).loss is None
+    # nothing came back at all: no loss (the no-signal check says that)
+    silent = 1e-3 * np.random.default_rng(11).standard_normal(whole.size)
+    assert measure_recording(silent, plan, max_latency_s=0.45).loss is None

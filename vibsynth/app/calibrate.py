@@ -6,10 +6,10 @@ output channel, sample-exact (``Engine.play_buffer(at_frame=...)``), while the i
 records every input of the sensor's device. The two streams' block stamps put the input's
 frames on the output's clock (:func:`~vibsynth.engine.input_ring.frame_offset`); what the
 loop adds (the actuator, the sensor, the converters) is measured from the impulse
-response's peak. The recording is then checked (clipping, a signal on the chosen input or on
-another one, background noise, SNR, repeatability) and turned into an absolute actuator
-profile (:func:`profile_document`), written atomically only when every channel of the run
-passed: a failed run changes no file.
+response's peak. The recording is then checked (clipping, a response lost mid-run, a signal
+on the chosen input or on another one, background noise, SNR, repeatability) and turned into
+an absolute actuator profile (:func:`profile_document`), written atomically only when every
+channel of the run passed: a failed run changes no file.
 """
 
 from __future__ import annotations
@@ -83,6 +83,26 @@ def _db(x: float) -> str:
     return f"{x:.1f}"
 
 
+def _loss_message(m: Measurement, input_label: str) -> str:
+    """What :attr:`Measurement.loss` says: when the response stopped, at which frequency of which sweep."""
+    loss = m.loss
+    assert loss is not None
+    n = m.sweeps_db.shape[0]
+    if loss.exact:
+        when = f"stopped {loss.seconds:.1f} s into sweep {loss.sweep} of {n} (at {loss.freq_hz:.0f} Hz)"
+    else:
+        when = (
+            f"stopped between {loss.seconds:.1f} s into sweep {loss.sweep} (at {loss.freq_hz:.0f} Hz) and "
+            f"{loss.missed_seconds:.1f} s into sweep {loss.missed_sweep} (at {loss.missed_freq_hz:.0f} Hz) of {n} "
+            "(too weak in between to tell when)"
+        )
+    return (
+        f"the response on {input_label} {when} and did not come back: the input or the actuator was lost "
+        "(check the sensor's cable and power, the amplifier and the actuator's wiring, then measure again); "
+        "no profile was written"
+    )
+
+
 def check_measurement(
     m: Measurement, *, input_label: str, level_dbfs: float, others: dict[int, Measurement] | None = None
 ) -> None:
@@ -108,6 +128,8 @@ def check_measurement(
             f"input {input_label} clipped during the sweep ({m.clipped} samples at full scale): lower --level "
             f"(now {level_dbfs:g} dBFS) or the input's gain"
         )
+    if m.loss is not None:
+        raise InputError(_loss_message(m, input_label))
     lo, hi = CHECK_BAND_HZ
     over = m.signal_rms_db - m.noise_rms_db
     if over < MIN_SIGNAL_OVER_FLOOR_DB:

@@ -28,8 +28,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="play swept sines through an output channel, record a sensor, write an actuator profile",
         description="Plays a second of silence then exponential sweeps (5 Hz-2 kHz) on one output channel (or every "
         "channel, one after the other), records the sensor on --input DEVICE:CH, measures the loop's latency, checks "
-        "clipping, signal, noise, SNR and repeatability, and writes an absolute actuator profile with its provenance. "
-        "A failed check prints one message and writes nothing.",
+        "clipping, a response lost mid-run, signal, noise, SNR and repeatability, and writes an absolute actuator "
+        "profile with its provenance. A failed check prints one message and writes nothing.",
     )
     which = r.add_mutually_exclusive_group(required=True)
     which.add_argument(

@@ -43,6 +43,7 @@ from vibsynth.errors import ParameterError
 __all__ = [
     "SweepPlan",
     "Measurement",
+    "ResponseLoss",
     "RESPONSE_F_MIN_HZ",
     "RESPONSE_F_MAX_HZ",
     "CLIP_LEVEL",
@@ -58,6 +59,8 @@ __all__ = [
     "combine_sweeps_db",
     "majority_spread_db",
     "band_response_db",
+    "sweep_frequency",
+    "response_loss",
     "measure_recording",
 ]
 
@@ -75,6 +78,14 @@ SMOOTHING_OCTAVES = 1.0 / 24.0
 #: and stops short of the second harmonic's response (0.46 s earlier for the default sweep).
 IR_WINDOW_S = 0.5
 IR_PRE_S = 0.2
+#: The level trace that finds a response lost mid-run (:func:`response_loss`): windows of this length (s),
+LOSS_WINDOW_S = 0.02
+#: a window this far (dB) above the lead silence's loudest windows (their 95th percentile) carries the sweep,
+LOSS_ALIVE_DB = 10.0
+#: one at most this far above them is silence,
+LOSS_SILENT_DB = 3.0
+#: and a loss needs at least this much (s) of the sweep that an earlier sweep brought back and this run did not.
+LOSS_MIN_S = 0.25
 
 
 def response_freqs(
@@ -419,6 +430,119 @@ class SweepPlan:
 
 
 @dataclass(frozen=True)
+class ResponseLoss:
+    """Where a recording's response stopped and stayed at the noise floor (:func:`response_loss`).
+
+    Times are into a sweep as it came back (after the loop's latency), to :data:`LOSS_WINDOW_S`.
+
+    Attributes
+    ----------
+    sweep : int
+        The sweep it was last heard in (1-based).
+    seconds : float
+        When it stopped: the end of the last window that carried it, into ``sweep``.
+    freq_hz : float
+        The sweep's instantaneous frequency at ``seconds``.
+    missed_sweep : int
+        The sweep of the first window that should have carried it (an earlier sweep's did) and was silent.
+    missed_seconds : float
+        That window's start, into ``missed_sweep``.
+    missed_freq_hz : float
+        The sweep's instantaneous frequency at ``missed_seconds``.
+    """
+
+    sweep: int
+    seconds: float
+    freq_hz: float
+    missed_sweep: int
+    missed_seconds: float
+    missed_freq_hz: float
+
+    @property
+    def exact(self) -> bool:
+        """True when the stop is known to two windows (else the sweep was too weak between the two points)."""
+        return self.missed_sweep == self.sweep and self.missed_seconds - self.seconds <= 2.5 * LOSS_WINDOW_S
+
+
+def sweep_frequency(plan: SweepPlan, seconds: ArrayLike) -> NDArray[np.float64]:
+    """The instantaneous frequency (Hz) of the plan's exponential sweep ``seconds`` into it, same shape."""
+    t = np.clip(np.asarray(seconds, dtype=np.float64), 0.0, plan.seconds)
+    return np.asarray(plan.f1 * (plan.f2 / plan.f1) ** (t / plan.seconds), dtype=np.float64)
+
+
+def _window_levels_db(x: NDArray[np.float64], win: int) -> NDArray[np.float64]:
+    """RMS (dB) of consecutive ``win``-sample windows of ``x``, shape (len(x) // win,)."""
+    n = x.size // win
+    ms = np.mean(x[: n * win].reshape(n, win) ** 2, axis=1)
+    return np.asarray(10.0 * np.log10(np.maximum(ms, 1e-30)), dtype=np.float64)
+
+
+def response_loss(recording: ArrayLike, plan: SweepPlan, latency: float) -> ResponseLoss | None:
+    """Where the response to the sweeps stopped and stayed at the noise floor, if it did.
+
+    Each sweep's recording (from its start plus ``latency``) is cut into :data:`LOSS_WINDOW_S`
+    windows and each window's RMS compared with the lead silence's: a window above the silence's
+    loudest windows by :data:`LOSS_ALIVE_DB` carries the sweep, one within :data:`LOSS_SILENT_DB`
+    of them is silence. The response was lost after the last window that carried the sweep when,
+    from there on, the windows where some sweep carried it (so the actuator and sensor answer at
+    that point of the sweep) are silent, at least 90 % of them and :data:`LOSS_MIN_S` worth. A
+    response that is weak at the same point of every sweep (an actuator that does not reach 2 kHz)
+    is no loss: no sweep carried it there.
+
+    Parameters
+    ----------
+    recording : array_like, shape (m,)
+        As for :func:`measure_recording`.
+    plan : SweepPlan
+    latency : float
+        The loop's latency (samples), from the impulse response's peak.
+
+    Returns
+    -------
+    loss : ResponseLoss or None
+        None when the response never came back (no window carried the sweep) or never stopped.
+    """
+    y = np.asarray(recording, dtype=np.float64)
+    win = max(1, int(round(LOSS_WINDOW_S * plan.fs)))
+    n_w = plan.sweep_samples // win
+    lag = max(0, int(round(latency)))
+    lead = _window_levels_db(y[: plan.lead], win)
+    if n_w == 0 or lead.size == 0:
+        return None
+    floor = float(np.percentile(lead, 95))
+    rows = []
+    for start in plan.starts():
+        part = y[start + lag : start + lag + n_w * win]
+        if part.size < n_w * win:
+            return None
+        rows.append(_window_levels_db(part, win))
+    levels = np.stack(rows)  # (n_sweeps, n_w)
+    carries = levels > floor + LOSS_ALIVE_DB
+    if not np.any(carries):
+        return None
+    flat = carries.ravel()
+    last = int(np.flatnonzero(flat)[-1])
+    index = np.arange(flat.size)
+    expected = (index > last) & np.tile(np.any(carries, axis=0), levels.shape[0])
+    if np.count_nonzero(expected) * win < LOSS_MIN_S * plan.fs:
+        return None
+    silent = levels.ravel()[expected] <= floor + LOSS_SILENT_DB
+    if np.mean(silent) < 0.9:
+        return None
+    sweep, w = divmod(last, n_w)
+    missed_sweep, missed_w = divmod(int(np.flatnonzero(expected)[np.argmax(silent)]), n_w)
+    seconds, missed_seconds = (w + 1) * win / plan.fs, missed_w * win / plan.fs
+    return ResponseLoss(
+        sweep=sweep + 1,
+        seconds=seconds,
+        freq_hz=float(sweep_frequency(plan, seconds)),
+        missed_sweep=missed_sweep + 1,
+        missed_seconds=missed_seconds,
+        missed_freq_hz=float(sweep_frequency(plan, missed_seconds)),
+    )
+
+
+@dataclass(frozen=True)
 class Measurement:
     """What one recording of a :class:`SweepPlan` tells.
 
@@ -449,6 +573,8 @@ class Measurement:
         Samples at or above :data:`CLIP_LEVEL`.
     repeatability_db : float
         Largest :func:`majority_spread_db` where the SNR is at least ``min_snr_db``.
+    loss : ResponseLoss or None
+        Where the response stopped mid-run and stayed at the noise floor (:func:`response_loss`).
     """
 
     freqs: NDArray[np.float64]
@@ -463,6 +589,7 @@ class Measurement:
     signal_rms_db: float
     clipped: int
     repeatability_db: float
+    loss: ResponseLoss | None = None
     extra: dict[str, float] = field(default_factory=dict)
 
     def snr_in(self, f_lo: float, f_hi: float) -> float:
@@ -572,4 +699,5 @@ def measure_recording(
         signal_rms_db=_rms_db(first_sweep),
         clipped=clipped_samples(y),
         repeatability_db=repeat,
+        loss=response_loss(y, plan, latency),
     )
