@@ -13,6 +13,8 @@ apt_packages="libportaudio2 jackd2 liblo-tools python3-venv python3-dev gcc"
 # --test: a real browser for the studio's end-to-end tests, mono to compile and run the C# client,
 # iproute2 (ip) for the discovery tests' private network namespaces.
 [ -n "$extras" ] && apt_packages="$apt_packages chromium chromium-driver mono-mcs mono-runtime iproute2"
+# --test: clang and libFuzzer (Debian 12's clang 14 ships it in libclang-rt-14-dev) for scripts/fuzz.sh.
+[ -n "$extras" ] && apt_packages="$apt_packages clang libclang-rt-14-dev"
 # --test: real sounds for the follow tests (speech, spoken channel names, desktop effects and their Ogg decoder).
 [ -n "$extras" ] && apt_packages="$apt_packages espeak-ng alsa-utils sound-theme-freedesktop vorbis-tools"
 missing=""

@@ -9,12 +9,16 @@ export VIBSYNTH_E2E_REQUIRED=1       # e2e tests fail (not skip) if JACK or libl
 export MIDO_BACKEND=${MIDO_BACKEND:-mido.backends.rtmidi/UNIX_JACK}
 export PYTHONDONTWRITEBYTECODE=1
 # Habits first: lint, formatting and types must have no findings (configured in pyproject.toml).
-.venv/bin/ruff check vibsynth tests benchmarks scripts
-.venv/bin/ruff format --check --quiet vibsynth tests benchmarks scripts
+.venv/bin/ruff check vibsynth tests benchmarks scripts fuzz
+.venv/bin/ruff format --check --quiet vibsynth tests benchmarks scripts fuzz
 .venv/bin/mypy
 # The science, the engine and the settings by mypy's own --strict (imports of the layers above, reached
 # through the package's face, are read for their types; their findings belong to the line above).
 .venv/bin/mypy --strict --follow-imports=silent --cache-dir .mypy_cache/strict vibsynth/dsp vibsynth/engine vibsynth/settings
+# Fuzz the OSC parsers for 60 s in all (libFuzzer + ASan/UBSan on the fast path's datagram parser, atheris on the
+# TCP framing; the regression corpus fuzz/corpus/ runs first): a crash fails the suite and names its
+# reproducer. Longer on demand: scripts/fuzz.sh --minutes N (docs/osc.md, Fuzzing).
+scripts/fuzz.sh --seconds 60
 if [ $# -gt 0 ]; then
   exec scripts/with_jack.sh -- .venv/bin/python -m pytest -q -ra "$@"
 fi
