@@ -93,10 +93,11 @@ def summarise(windows: list[dict], seconds: float) -> dict:
     """Per figure: per-window values, median and max per 10 s, total."""
     out: dict = {"windows": len(windows)}
     for key in FIGURES:
-        values = [w[key] for w in windows if w.get(key) is not None]
-        if not values:
+        having = [w for w in windows if w.get(key) is not None]
+        if not having:
             continue
-        per10 = [10.0 * v / max(w["seconds"], 1e-9) for v, w in zip(values, windows)]
+        values = [w[key] for w in having]
+        per10 = [10.0 * w[key] / max(w["seconds"], 1e-9) for w in having]
         out[key] = {
             "values": values,
             "median_per_10s": float(np.median(per10)),
