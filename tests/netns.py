@@ -13,6 +13,7 @@ import os
 import shutil
 import subprocess
 import sys
+from http.server import BaseHTTPRequestHandler
 from pathlib import Path
 from typing import Any
 
@@ -73,3 +74,13 @@ def start_serve(folder: str | Path, name: str, *, seconds: int = 60, extra: str 
             return serve, line.strip()
     serve.wait(20)
     raise AssertionError(f"serve exited ({serve.returncode}) before its OSCQuery banner")
+
+
+def send_json(handler: BaseHTTPRequestHandler, tree: object) -> None:
+    """Answer a scripted HTTP server's request (an OSCQuery tree, a HOST_INFO) with ``tree`` as JSON."""
+    body = json.dumps(tree).encode()
+    handler.send_response(200)
+    handler.send_header("Content-Type", "application/json")
+    handler.send_header("Content-Length", str(len(body)))
+    handler.end_headers()
+    handler.wfile.write(body)

@@ -2215,24 +2215,51 @@ namespace Vibsynth
 
     // ================================================================== discovery: mDNS + OSCQuery
 
-    /// <summary>An OSCQuery service found on the network (a vibsynth server, or any other).</summary>
+    /// <summary>
+    /// An OSCQuery service found on the network (a vibsynth server, or any other), resolved to an OSC
+    /// endpoint or not.
+    /// </summary>
+    /// <remarks>
+    /// A service is <see cref="Resolved"/> once its mDNS SRV record (the OSCQuery port) and its HOST_INFO's
+    /// OSC_PORT both answered within the timeout. An unresolved one has no endpoint: <see cref="OscHost"/>
+    /// and <see cref="OscPort"/> throw <see cref="VibsynthException"/> with <see cref="Unresolved"/>'s reason,
+    /// so a port that was never received (0) cannot be handed out.
+    /// </remarks>
     public sealed class VibsynthService
     {
+        string oscHost;
+        int oscPort;
+
         /// <summary>The mDNS instance name (discovery.name of the server, e.g. "vibsynth on studio-pc").</summary>
         public string Name { get; internal set; }
-        /// <summary>Its OSCQuery server, e.g. "http://192.168.1.5:9572/".</summary>
+        /// <summary>Its OSCQuery server, e.g. "http://192.168.1.5:9572/" (null: its SRV record never answered).</summary>
         public string OscQueryUrl { get; internal set; }
+        /// <summary>Why it has no OSC endpoint (null when <see cref="Resolved"/>), e.g. "no SRV record within 2 s".</summary>
+        public string Unresolved { get; internal set; }
+        /// <summary>True when <see cref="OscHost"/> and <see cref="OscPort"/> hold an endpoint the service named.</summary>
+        public bool Resolved { get { return Unresolved == null; } }
+
         /// <summary>Where it takes OSC: HOST_INFO's OSC_IP (the service's address when HOST_INFO names none).</summary>
-        public string OscHost { get; internal set; }
-        /// <summary>HOST_INFO's OSC_PORT (0: HOST_INFO did not answer).</summary>
-        public int OscPort { get; internal set; }
+        /// <exception cref="VibsynthException">The service is not <see cref="Resolved"/>.</exception>
+        public string OscHost { get { Check(); return oscHost; } internal set { oscHost = value; } }
+        /// <summary>HOST_INFO's OSC_PORT (1..65535).</summary>
+        /// <exception cref="VibsynthException">The service is not <see cref="Resolved"/>.</exception>
+        public int OscPort { get { Check(); return oscPort; } internal set { oscPort = value; } }
         /// <summary>HOST_INFO's OSC_TRANSPORT ("UDP").</summary>
         public string OscTransport { get; internal set; }
 
+        void Check()
+        {
+            if (Unresolved != null)
+                throw new VibsynthException("OSCQuery service '" + Name + "' is unresolved: " + Unresolved);
+        }
+
         public override string ToString()
         {
+            if (Unresolved != null)
+                return Name + ": unresolved (" + Unresolved + ")";
             return string.Format(CultureInfo.InvariantCulture, "{0}: osc {1}://{2}:{3}, oscquery {4}",
-                Name, (OscTransport ?? "UDP").ToLowerInvariant(), OscHost, OscPort, OscQueryUrl);
+                Name, (OscTransport ?? "UDP").ToLowerInvariant(), oscHost, oscPort, OscQueryUrl);
         }
     }
 
@@ -2242,7 +2269,10 @@ namespace Vibsynth
     /// </summary>
     /// <remarks>
     /// One-shot mDNS queries (RFC 6762 section 5.1: sent from an ephemeral port, answered by unicast),
-    /// repeated every 250 ms for the timeout; then one HTTP GET of "?HOST_INFO" per service found.
+    /// repeated every 250 ms for the timeout, asking for the SRV record of each service whose PTR came
+    /// without one; then HTTP GETs of "?HOST_INFO" per service (retried every 250 ms for up to the
+    /// timeout, all services at once). A service whose SRV record or HOST_INFO's OSC_PORT did not answer
+    /// in time is listed unresolved, with the reason, never with a port it did not receive.
     /// Blocking: call it from a worker thread (or <see cref="DiscoverAsync"/>), not Unity's main thread.
     /// </remarks>
     public static class VibsynthDiscovery
@@ -2251,27 +2281,36 @@ namespace Vibsynth
         public const string ServiceType = "_oscjson._tcp.local";
         const int MdnsPort = 5353;
         const int MaxHostInfo = 65536;
+        const int RetryMs = 250;
         static readonly IPAddress MdnsGroup = IPAddress.Parse("224.0.0.251");
 
-        /// <summary>The OSCQuery services that answered within <paramref name="timeout"/>, by name.</summary>
+        /// <summary>
+        /// The OSCQuery services that answered within <paramref name="timeout"/>, by name: resolved ones, and
+        /// those whose SRV record or HOST_INFO did not answer (<see cref="VibsynthService.Resolved"/> false).
+        /// </summary>
+        /// <remarks>Takes the timeout for mDNS, then up to the timeout again for HOST_INFO.</remarks>
         public static IList<VibsynthService> Discover(TimeSpan timeout)
         {
-            var found = Browse(timeout);
-            var services = new List<VibsynthService>();
-            foreach (var entry in found)
-            {
-                var service = new VibsynthService
-                {
-                    Name = entry.Key,
-                    OscQueryUrl = string.Format(CultureInfo.InvariantCulture, "http://{0}:{1}/", entry.Value.Key, entry.Value.Value),
-                    OscHost = entry.Value.Key,
-                    OscTransport = "UDP",
-                };
-                ReadHostInfo(service, timeout);
-                services.Add(service);
-            }
+            var services = Browse(timeout, null);
+            ReadHostInfos(services, timeout);
             services.Sort((a, b) => string.CompareOrdinal(a.Name, b.Name));
             return services;
+        }
+
+        /// <summary>HOST_INFO of every service whose SRV record answered, all at once, for up to the timeout.</summary>
+        static void ReadHostInfos(List<VibsynthService> services, TimeSpan timeout)
+        {
+            var deadline = DateTime.UtcNow + timeout;
+            var fetches = new List<Task>();
+            foreach (var service in services)
+            {
+                if (service.Resolved)
+                {
+                    var s = service;
+                    fetches.Add(Task.Run(() => ReadHostInfo(s, deadline, timeout)));
+                }
+            }
+            Task.WaitAll(fetches.ToArray());
         }
 
         /// <summary><see cref="Discover"/> on the thread pool.</summary>
@@ -2281,53 +2320,104 @@ namespace Vibsynth
         }
 
         /// <summary>
-        /// A client for the first service whose name contains <paramref name="nameContains"/> (null: any
-        /// service whose HOST_INFO named an OSC port); VibsynthException when none answered.
+        /// A client for the first resolved service whose name contains <paramref name="nameContains"/> (null:
+        /// any); VibsynthException when none answered, or when those that did are unresolved (with why).
         /// </summary>
+        /// <remarks>
+        /// Browses until a matching service's SRV record answers (at most the timeout), then reads the
+        /// HOST_INFO of the matching services found by then (up to the timeout again).
+        /// </remarks>
         public static VibsynthClient Connect(string nameContains = null, TimeSpan? timeout = null)
         {
-            foreach (var service in Discover(timeout ?? TimeSpan.FromSeconds(2)))
+            var wait = timeout ?? TimeSpan.FromSeconds(2);
+            Func<string, bool> matches = name => nameContains == null || name.IndexOf(nameContains, StringComparison.Ordinal) >= 0;
+            var services = Browse(wait, matches).FindAll(service => matches(service.Name));
+            ReadHostInfos(services, wait);
+            services.Sort((a, b) => string.CompareOrdinal(a.Name, b.Name));
+            string unresolved = null;
+            foreach (var service in services)
             {
-                if (service.OscPort > 0 && (nameContains == null || service.Name.IndexOf(nameContains, StringComparison.Ordinal) >= 0))
+                if (service.Resolved)
                     return new VibsynthClient(service.OscHost, service.OscPort);
+                if (unresolved == null)
+                    unresolved = "OSCQuery service '" + service.Name + "' found over mDNS but unresolved: " + service.Unresolved;
             }
+            if (unresolved != null)
+                throw new VibsynthException(unresolved);
             throw new VibsynthException(nameContains == null
                 ? "no OSCQuery service found over mDNS"
                 : "no OSCQuery service named like '" + nameContains + "' found over mDNS");
         }
 
-        /// <summary>The mDNS query: one question, PTR for the service type, the unicast-response bit set.</summary>
-        internal static byte[] Query()
+        /// <summary>
+        /// The mDNS query, unicast-response bit set on each question: PTR for the service type, and SRV for
+        /// each of <paramref name="srvOf"/> (instances whose PTR came without their SRV record).
+        /// </summary>
+        internal static byte[] Query(ICollection<string> srvOf = null)
         {
-            var bytes = new List<byte> { 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0 };
-            foreach (var label in ServiceType.Split('.'))
-            {
-                bytes.Add((byte)label.Length);
-                bytes.AddRange(Encoding.ASCII.GetBytes(label));
-            }
-            bytes.AddRange(new byte[] { 0, 0, 12, 0x80, 1 });
+            int count = 1 + (srvOf == null ? 0 : srvOf.Count);
+            var bytes = new List<byte> { 0, 0, 0, 0, (byte)(count >> 8), (byte)count, 0, 0, 0, 0, 0, 0 };
+            AddQuestion(bytes, ServiceType, 12);
+            if (srvOf != null)
+                foreach (var instance in srvOf)
+                    AddQuestion(bytes, instance, 33);
             return bytes.ToArray();
         }
 
-        /// <summary>Instance name -> (address, OSCQuery port), from the answers received within the timeout.</summary>
-        static Dictionary<string, KeyValuePair<string, int>> Browse(TimeSpan timeout)
+        static void AddQuestion(List<byte> bytes, string name, int type)
         {
+            foreach (var label in SplitName(name))
+            {
+                var raw = Encoding.UTF8.GetBytes(label);
+                int length = Math.Min(raw.Length, 63);  // a DNS label's limit (a longer one cannot have been received)
+                bytes.Add((byte)length);
+                for (int k = 0; k < length; k++)
+                    bytes.Add(raw[k]);
+            }
+            bytes.AddRange(new byte[] { 0, 0, (byte)type, 0x80, 1 });
+        }
+
+        /// <summary>An instance name's labels: its first label (the service name) may hold dots.</summary>
+        static IEnumerable<string> SplitName(string name)
+        {
+            string suffix = "." + ServiceType;
+            if (name.EndsWith(suffix, StringComparison.OrdinalIgnoreCase) && name.Length > suffix.Length)
+            {
+                yield return name.Substring(0, name.Length - suffix.Length);
+                name = ServiceType;
+            }
+            foreach (var label in name.Split('.'))
+                yield return label;
+        }
+
+        /// <summary>
+        /// The services whose PTR answered within the timeout (or until the SRV record of one whose name
+        /// <paramref name="enough"/> accepts answered): with their OSCQuery URL when their SRV record
+        /// answered too, else unresolved.
+        /// </summary>
+        static List<VibsynthService> Browse(TimeSpan timeout, Func<string, bool> enough)
+        {
+            string suffix = "." + ServiceType;
             var instances = new HashSet<string>();
             var srv = new Dictionary<string, KeyValuePair<string, int>>();
             var hosts = new Dictionary<string, string>();
             var senders = new Dictionary<string, string>();
             using (var socket = new UdpClient(new IPEndPoint(IPAddress.Any, 0)))
             {
-                var query = Query();
                 var deadline = DateTime.UtcNow + timeout;
                 var nextQuery = DateTime.UtcNow;
                 while (DateTime.UtcNow < deadline)
                 {
                     if (DateTime.UtcNow >= nextQuery)
                     {
+                        var pending = new List<string>();
+                        foreach (var instance in instances)
+                            if (!srv.ContainsKey(instance))
+                                pending.Add(instance);
+                        var query = Query(pending);
                         try { socket.Send(query, query.Length, new IPEndPoint(MdnsGroup, MdnsPort)); }
                         catch (SocketException) { }
-                        nextQuery = DateTime.UtcNow + TimeSpan.FromMilliseconds(250);
+                        nextQuery = DateTime.UtcNow + TimeSpan.FromMilliseconds(RetryMs);
                     }
                     var wait = Math.Min((deadline - DateTime.UtcNow).TotalMilliseconds, (nextQuery - DateTime.UtcNow).TotalMilliseconds);
                     if (wait <= 0 || !socket.Client.Poll((int)(wait * 1000), SelectMode.SelectRead))
@@ -2339,22 +2429,49 @@ namespace Vibsynth
                     try { Parse(packet, from.Address.ToString(), instances, srv, hosts, senders); }
                     catch (IndexOutOfRangeException) { }  // a truncated answer: skip it
                     catch (FormatException) { }
+                    if (enough != null && Found(instances, srv, enough, suffix))
+                        break;
                 }
             }
-            var found = new Dictionary<string, KeyValuePair<string, int>>();
-            string suffix = "." + ServiceType;
+            var found = new Dictionary<string, VibsynthService>();
             foreach (var instance in instances)
             {
+                string name = InstanceName(instance, suffix);
+                var service = new VibsynthService { Name = name, OscTransport = "UDP" };
+                found[name] = service;
                 KeyValuePair<string, int> target;
                 if (!srv.TryGetValue(instance, out target))
+                {
+                    service.Unresolved = string.Format(CultureInfo.InvariantCulture,
+                        "no SRV record (its OSCQuery port) answered within {0:0.###} s", timeout.TotalSeconds);
                     continue;
+                }
+                if (target.Value == 0)
+                {
+                    service.Unresolved = "its SRV record names port 0";
+                    continue;
+                }
                 string address;
                 if (!hosts.TryGetValue(target.Key, out address))
                     address = senders[instance];
-                string name = instance.EndsWith(suffix, StringComparison.OrdinalIgnoreCase) ? instance.Substring(0, instance.Length - suffix.Length) : instance;
-                found[name] = new KeyValuePair<string, int>(address, target.Value);
+                service.OscQueryUrl = string.Format(CultureInfo.InvariantCulture, "http://{0}:{1}/", address, target.Value);
+                service.OscHost = address;
             }
-            return found;
+            return new List<VibsynthService>(found.Values);
+        }
+
+        /// <summary>True when an instance <paramref name="enough"/> accepts has its SRV record.</summary>
+        static bool Found(HashSet<string> instances, Dictionary<string, KeyValuePair<string, int>> srv, Func<string, bool> enough, string suffix)
+        {
+            foreach (var instance in instances)
+                if (srv.ContainsKey(instance) && enough(InstanceName(instance, suffix)))
+                    return true;
+            return false;
+        }
+
+        static string InstanceName(string instance, string suffix)
+        {
+            return instance.EndsWith(suffix, StringComparison.OrdinalIgnoreCase) ? instance.Substring(0, instance.Length - suffix.Length) : instance;
         }
 
         /// <summary>Reads PTR, SRV and A records of one mDNS message (answers and additional records).</summary>
@@ -2436,42 +2553,75 @@ namespace Vibsynth
             return string.Join(".", labels);
         }
 
-        /// <summary>GET url?HOST_INFO (bounded): fills the OSC address; leaves OscPort 0 when it does not answer.</summary>
-        static void ReadHostInfo(VibsynthService service, TimeSpan timeout)
+        /// <summary>
+        /// GET url?HOST_INFO until it answers or <paramref name="deadline"/> (every 250 ms): fills the OSC
+        /// address from it, or says why the service is unresolved.
+        /// </summary>
+        static void ReadHostInfo(VibsynthService service, DateTime deadline, TimeSpan timeout)
         {
-            string text;
-            try
+            string text = null, failure = "no answer";
+            while (true)
             {
-                var request = (HttpWebRequest)WebRequest.Create(service.OscQueryUrl + "?HOST_INFO");
-                request.Timeout = (int)Math.Max(100, timeout.TotalMilliseconds);
-                request.Proxy = null;
-                using (var response = request.GetResponse())
-                using (var stream = response.GetResponseStream())
+                var left = deadline - DateTime.UtcNow;
+                if (left <= TimeSpan.Zero)
+                    break;
+                var attempt = DateTime.UtcNow;
+                try
                 {
-                    var buffer = new byte[MaxHostInfo];
-                    int total = 0, n;
-                    while (total < buffer.Length && (n = stream.Read(buffer, total, buffer.Length - total)) > 0)
-                        total += n;
-                    text = Encoding.UTF8.GetString(buffer, 0, total);
+                    text = Get(service.OscQueryUrl + "?HOST_INFO", left);
+                    break;
                 }
+                catch (WebException exc)
+                {
+                    failure = exc.Message;
+                }
+                catch (System.IO.IOException exc)
+                {
+                    failure = exc.Message;
+                }
+                var pause = attempt + TimeSpan.FromMilliseconds(RetryMs) - DateTime.UtcNow;
+                if (pause > TimeSpan.Zero && DateTime.UtcNow + pause < deadline)
+                    Thread.Sleep(pause);
             }
-            catch (WebException)
+            if (text == null)
             {
-                return;
-            }
-            catch (System.IO.IOException)
-            {
+                service.Unresolved = string.Format(CultureInfo.InvariantCulture,
+                    "its HOST_INFO ({0}?HOST_INFO) did not answer within {1:0.###} s ({2})",
+                    service.OscQueryUrl, timeout.TotalSeconds, failure);
                 return;
             }
             var ip = System.Text.RegularExpressions.Regex.Match(text, "\"OSC_IP\"\\s*:\\s*\"([^\"\\\\]*)\"");
-            var port = System.Text.RegularExpressions.Regex.Match(text, "\"OSC_PORT\"\\s*:\\s*(\\d{1,5})");
+            var port = System.Text.RegularExpressions.Regex.Match(text, "\"OSC_PORT\"\\s*:\\s*(\\d{1,5})(?![\\d.])");
             var transport = System.Text.RegularExpressions.Regex.Match(text, "\"OSC_TRANSPORT\"\\s*:\\s*\"([A-Za-z]+)\"");
+            int number = port.Success ? int.Parse(port.Groups[1].Value, CultureInfo.InvariantCulture) : 0;
+            if (number < 1 || number > 65535)
+            {
+                service.Unresolved = "its HOST_INFO (" + service.OscQueryUrl + "?HOST_INFO) names no OSC_PORT in 1..65535";
+                return;
+            }
             if (ip.Success && ip.Groups[1].Value.Length > 0 && ip.Groups[1].Value != "0.0.0.0")
                 service.OscHost = ip.Groups[1].Value;
-            if (port.Success)
-                service.OscPort = int.Parse(port.Groups[1].Value, CultureInfo.InvariantCulture);
+            service.OscPort = number;
             if (transport.Success)
                 service.OscTransport = transport.Groups[1].Value;
+        }
+
+        /// <summary>One bounded HTTP GET (up to 64 KiB of the body, as UTF-8).</summary>
+        static string Get(string url, TimeSpan timeout)
+        {
+            var request = (HttpWebRequest)WebRequest.Create(url);
+            request.Timeout = (int)Math.Max(100, timeout.TotalMilliseconds);
+            request.ReadWriteTimeout = request.Timeout;
+            request.Proxy = null;
+            using (var response = request.GetResponse())
+            using (var stream = response.GetResponseStream())
+            {
+                var buffer = new byte[MaxHostInfo];
+                int total = 0, n;
+                while (total < buffer.Length && (n = stream.Read(buffer, total, buffer.Length - total)) > 0)
+                    total += n;
+                return Encoding.UTF8.GetString(buffer, 0, total);
+            }
         }
     }
 }

@@ -30,8 +30,8 @@ def main(folder: str, exe: str) -> None:
             done = subprocess.run(["mono", "--debug", exe, NAME], capture_output=True, text=True, timeout=60)
             found = dict(line.partition("=")[::2] for line in done.stdout.splitlines() if "=" in line)
             # the first runs may browse while serve still probes its name (about 1 s): until both
-            # the listing and the connection have seen it
-            if "intensity" in found and found.get("service") == NAME:
+            # the listing (resolved: SRV and HOST_INFO answered in time) and the connection have seen it
+            if "intensity" in found and found.get("service") == NAME and f"{NAME}.osc" in found:
                 break
             attempts.append(f"exit {done.returncode}: {done.stdout[-300:]!r} {done.stderr[-300:]!r}")
             time.sleep(0.5)

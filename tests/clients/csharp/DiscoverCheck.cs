@@ -1,5 +1,5 @@
 // The C# client's discovery, run by tests/clients/netns_discover.py inside a network namespace:
-// Discover() lists the OSCQuery services (key=value lines), Connect(name) reads channel 1's intensity.
+// Discover() lists the OSCQuery services (key=value lines: an endpoint, or why it has none), Connect(name) reads channel 1's intensity.
 using System;
 using System.Globalization;
 using Vibsynth;
@@ -14,7 +14,10 @@ public static class DiscoverCheck
         {
             Console.WriteLine("service=" + s.Name);
             Console.WriteLine(s.Name + ".url=" + s.OscQueryUrl);
-            Console.WriteLine(s.Name + ".osc=" + s.OscHost + ":" + s.OscPort.ToString(CultureInfo.InvariantCulture));
+            if (s.Resolved)
+                Console.WriteLine(s.Name + ".osc=" + s.OscHost + ":" + s.OscPort.ToString(CultureInfo.InvariantCulture));
+            else
+                Console.WriteLine(s.Name + ".unresolved=" + s.Unresolved);
             Console.WriteLine(s.Name + ".transport=" + s.OscTransport);
         }
         using (var client = VibsynthDiscovery.Connect(args[0], TimeSpan.FromSeconds(2)))

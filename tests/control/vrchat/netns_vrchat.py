@@ -20,7 +20,7 @@ import urllib.request
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import vibsynth
-from tests.netns import start_serve
+from tests.netns import send_json, start_serve
 from vibsynth.control.osc.codec import encode_message
 from vibsynth.control.oscquery.discovery import Advertiser, discover
 
@@ -69,12 +69,7 @@ class VrchatHttp(BaseHTTPRequestHandler):
             tree = AVATAR
         else:
             tree = {"FULL_PATH": "/", "ACCESS": 0}
-        body = json.dumps(tree).encode()
-        self.send_response(200)
-        self.send_header("Content-Type", "application/json")
-        self.send_header("Content-Length", str(len(body)))
-        self.end_headers()
-        self.wfile.write(body)
+        send_json(self, tree)
 
     def log_message(self, *args: object) -> None:
         pass
