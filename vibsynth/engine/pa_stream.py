@@ -34,11 +34,21 @@ log = logging.getLogger(__name__)
 
 
 def import_sounddevice() -> ModuleType:
-    """Import python-sounddevice (a dependency), turning a missing PortAudio into :class:`DeviceError`."""
+    """Import python-sounddevice (a dependency), turning a missing PortAudio into :class:`DeviceError`.
+
+    Raises
+    ------
+    DeviceError
+        The PortAudio shared library is missing (sounddevice raises OSError: its Linux wheels use
+        the system's libportaudio2), or the sounddevice package itself (an install without
+        dependencies): one line saying what to install.
+    """
     try:
         import sounddevice
     except OSError as exc:  # the PortAudio shared library is missing
         raise DeviceError(f"PortAudio is not available ({exc}); install libportaudio2") from None
+    except ImportError as exc:  # installed with --no-deps, or removed
+        raise DeviceError(f"the sounddevice package is not installed ({exc}); pip install sounddevice") from None
     module: ModuleType = sounddevice
     return module
 
