@@ -34,7 +34,7 @@ def test_the_example_compiles_against_the_unity_shim_and_the_shim_is_minimal(uni
     so passing here says nothing about Unity APIs the example does not call."""
     shim = UNITY_SHIM.read_text(encoding="utf-8")
     example = UNITY_EXAMPLE.read_text(encoding="utf-8")
-    declared = set(re.findall(r"public (?:sealed |static |abstract )*(?:class|struct) (\w+)", shim))
+    declared = set(re.findall(r"public (?:sealed |static |abstract |partial )*(?:class|struct) (\w+)", shim))
     # base classes of what the example names, and the type GetContact returns
     implied = {"Object", "Component", "Behaviour", "PropertyAttribute", "ContactPoint"}
     assert implied <= declared

@@ -3,12 +3,13 @@
 // or a misused API; UnityCheck.cs also drives the component through it against a real server.
 // Behaviour is the documented one for what the example needs (a Transform with position, rotation
 // about y and a uniform scale; contacts given by the test); nothing else of Unity is imitated.
+// The partial types are extended by the Unity package's test (tests/clients/test_unity_package.py).
 
 using System;
 
 namespace UnityEngine
 {
-    public struct Vector3
+    public partial struct Vector3
     {
         public float x, y, z;
 
@@ -34,11 +35,11 @@ namespace UnityEngine
     {
     }
 
-    public class Component : Object
+    public partial class Component : Object
     {
     }
 
-    public class Transform : Component
+    public partial class Transform : Component
     {
         public Vector3 position;
         /// <summary>Rotation about the y axis in degrees (the shim's only rotation).</summary>
@@ -77,7 +78,7 @@ namespace UnityEngine
         }
     }
 
-    public class Collision
+    public partial class Collision
     {
         readonly ContactPoint[] contacts;
 
@@ -96,7 +97,7 @@ namespace UnityEngine
         public static float time { get; set; }
     }
 
-    public static class Mathf
+    public static partial class Mathf
     {
         public static float Abs(float f) { return Math.Abs(f); }
         public static int Clamp(int value, int min, int max) { return value < min ? min : value > max ? max : value; }
