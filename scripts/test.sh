@@ -19,6 +19,7 @@ export PYTHONDONTWRITEBYTECODE=1
 # TCP framing; the regression corpus fuzz/corpus/ runs first): a crash fails the suite and names its
 # reproducer. Longer on demand: scripts/fuzz.sh --minutes N (docs/osc.md, Fuzzing).
 scripts/fuzz.sh --seconds 60
+scripts/sanitize.sh  # the C extensions under ASan/UBSan: the C-facing and hostile-API tests (docs/engine.md)
 if [ $# -gt 0 ]; then
   exec scripts/with_jack.sh -- .venv/bin/python -m pytest -q -ra "$@"
 fi

@@ -274,3 +274,18 @@ def test_the_longest_glides_and_fades_render_exactly():
     assert b0 == 0.0 and b1 == pytest.approx(200 / 3.6e6, rel=1e-9)
     assert (muted0, muted1) == (True, False)
     assert np.abs(render(core, 64)[:, 1]).max() > 0.0
+
+
+def test_a_bad_output_map_raises_and_keeps_the_old_one():
+    core = _core.Core(**core_args())
+    core.set_output_map(3, [2, 0])
+    with pytest.raises(TypeError):
+        core.set_output_map(3, 5)
+    with pytest.raises(ValueError, match="device column out of range"):
+        core.set_output_map(3, [0, 3])
+    with pytest.raises(ValueError, match="one device column per engine channel"):
+        core.set_output_map(3, [0])
+    out = np.zeros((64, 3), np.float32)
+    core.run_callback(out, 0)
+    assert np.array_equal(out[:, 1], np.zeros(64, np.float32))  # column 1 stays silent: the map is [2, 0]
+    assert np.abs(out[:, 0]).max() > 0.0 and np.abs(out[:, 2]).max() > 0.0

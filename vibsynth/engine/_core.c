@@ -851,7 +851,9 @@ static PyObject *Core_set_output_map(Core *self, PyObject *args) {
     int dev_channels;
     PyObject *cols;
     if (!PyArg_ParseTuple(args, "iO", &dev_channels, &cols)) return NULL;
-    if (PySequence_Length(cols) != self->channels || dev_channels < 1) {
+    Py_ssize_t len = PySequence_Length(cols);
+    if (len < 0) return NULL; /* not a sequence: its TypeError */
+    if (len != self->channels || dev_channels < 1) {
         PyErr_SetString(PyExc_ValueError, "need one device column per engine channel");
         return NULL;
     }

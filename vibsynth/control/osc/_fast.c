@@ -646,8 +646,8 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
         const vs_core_api_t *api = (const vs_core_api_t *)PyCapsule_Import(VS_CORE_CAPSULE, 0);
         if (!api) return -1;
         if (!api->core_type || !PyObject_TypeCheck(core, (PyTypeObject *)api->core_type)) {
-            PyErr_Format(PyExc_TypeError, "core must be a vibsynth.engine._core.Core or None, not %.100s",
-                         Py_TYPE(core)->tp_name);
+            PyErr_Format(PyExc_TypeError, "core must be a vibsynth.engine._core.Core or None, not %R",
+                         (PyObject *)Py_TYPE(core)); /* %R of the type, not tp_name: the limited API has no tp_name */
             return -1;
         }
         if (!api->ready((struct vs_core *)core)) {
