@@ -59,12 +59,23 @@ def datagrams() -> list[bytes]:
     packets.append(encode_bundle(IMMEDIATE, knobs))
     longest = "/" + "a" * (OSC_FAST_ADDRESS_MAX - 1)
     packets += [encode_message(longest, (0.5, 1.0), "ff"), encode_message(longest, (0.5, 1.0), "dd")]
-    return packets
+    return packets + every_kind()
+
+
+def every_kind() -> list[bytes]:
+    """What the decoder reads besides the documented shapes: every type tag, an array, nested bundles."""
+    tags = "ifsbhtdcSTFNI"
+    values = (1, 0.5, "s", b"\x01\x02\x03", 2**40, 7, 0.25, "c", "S", True, False, None, math.inf)
+    every = encode_message("/vibsynth/status", values, tags)
+    head = encode_message("/vibsynth/texture", (), "")[:-4]  # the address, padded; then the raw tags
+    array = head + b",[ff]rm\x00" + struct.pack(">ff", 0.5, 1.0) + b"\x00\x00\x00\xff" * 2
+    inner = encode_bundle(IMMEDIATE, [every])
+    return [every, array, encode_bundle(IMMEDIATE, [inner, array]), encode_bundle(1 << 32, [])]
 
 
 def streams(packets: list[bytes]) -> list[bytes]:
     """TCP streams: runs of packets framed with SLIP, and with a length prefix."""
-    runs = [packets[i : i + 3] for i in range(0, len(packets), 17)]
+    runs = [packets[i : i + 3] for i in range(0, len(packets), 17)] + [every_kind()]
     return [b"".join(frame(p) for p in run) for run in runs for frame in (slip_encode, length_encode)]
 
 
