@@ -163,6 +163,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run(argv: Sequence[str] | None) -> int:
     """Parse and run one command: its exit code, every error as one line (a closed stdout is the caller's)."""
+    if list(sys.argv[1:] if argv is None else argv) == ["--version"]:
+        # answered before the sub-commands are imported (numpy, scipy, aiohttp...: most of a start)
+        print(f"vibsynth {__version__}")
+        return 0
     parser = build_parser()
     args = parser.parse_args(argv)
     level = logging.WARNING if args.verbose == 0 else logging.INFO if args.verbose == 1 else logging.DEBUG
