@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Atheris (libFuzzer for Python) harness of the OSC/TCP framing (vibsynth/control/osc/transport.py).
 
-Each input is a TCP byte stream as a client sends it, with a header saying how the receive
-thread's reads cut it and how large a frame may be. It goes through
+Each input is a TCP byte stream as a client sends it, after a header saying how large a frame may
+be and where the receive thread's reads cut it (:func:`split_input`). It goes through
 :class:`~vibsynth.control.osc.transport.FramingDetector` (SLIP or length-prefixed, told by the
 first byte), and each frame through :func:`~vibsynth.control.osc.codec.decode_packet`, as
 ``TcpTransport`` does. Checked, besides "no exception but MalformedPacket":
@@ -86,12 +86,22 @@ def feed(stream: bytes, cuts: list[int], max_frame: int) -> tuple[FramingDetecto
     return detector, frames
 
 
+def split_input(data: bytes) -> tuple[int, list[int], bytes]:
+    """An input is ``LIMIT NCUTS CUT... STREAM``: LIMIT < 128 means frames up to 64 KiB (the server's),
+    else up to 1 + LIMIT % 96 bytes; NCUTS % 9 cut positions of 2 bytes each (big-endian, modulo the
+    stream's length + 1) say where the receive thread's reads end; the rest is the TCP stream.
+    fuzz/seeds.py writes its streams after ``00 00``."""
+    if len(data) < 2:
+        return 65536, [], b""
+    max_frame = 65536 if data[0] < 128 else 1 + data[0] % 96
+    ncuts = min(data[1] % 9, (len(data) - 2) // 2)
+    stream = data[2 + 2 * ncuts :]
+    cuts = sorted(int.from_bytes(data[2 + 2 * i : 4 + 2 * i], "big") % (len(stream) + 1) for i in range(ncuts))
+    return max_frame, cuts, stream
+
+
 def check(data: bytes) -> None:
-    fdp = atheris.FuzzedDataProvider(data)
-    max_frame = fdp.ConsumeIntInRange(1, 96) if fdp.ConsumeBool() else 65536
-    cuts = fdp.ConsumeIntListInRange(fdp.ConsumeIntInRange(0, 8), 0, 1 << 16)
-    stream = fdp.ConsumeBytes(fdp.remaining_bytes())
-    cuts = sorted(c % (len(stream) + 1) for c in cuts)
+    max_frame, cuts, stream = split_input(data)
 
     whole, frames = feed(stream, [], max_frame)
     cut, cut_frames = feed(stream, cuts, max_frame)

@@ -73,9 +73,22 @@ def every_kind() -> list[bytes]:
     return [every, array, encode_bundle(IMMEDIATE, [inner, array]), encode_bundle(1 << 32, [])]
 
 
+def refused() -> list[bytes]:
+    """Packets the decoder refuses at its last checks: a non-UTF-8 address, a char beyond Unicode,
+    bundles nested too deep."""
+    deep = encode_message("/vibsynth/ping", (1,), "i")
+    for _ in range(10):
+        deep = encode_bundle(IMMEDIATE, [deep])
+    return [
+        b"/vibsynth/\xff\x00,\x00\x00\x00",
+        encode_message("/vibsynth/get", (1,), "i").replace(b",i", b",c")[:-4] + struct.pack(">i", 0x110000),
+        deep,
+    ]
+
+
 def streams(packets: list[bytes]) -> list[bytes]:
     """TCP streams: runs of packets framed with SLIP, and with a length prefix."""
-    runs = [packets[i : i + 3] for i in range(0, len(packets), 17)] + [every_kind()]
+    runs = [packets[i : i + 3] for i in range(0, len(packets), 17)] + [every_kind(), refused()]
     return [b"".join(frame(p) for p in run) for run in runs for frame in (slip_encode, length_encode)]
 
 
@@ -111,6 +124,10 @@ def write_dictionary(path: Path, tokens: list[bytes]) -> None:
     path.write_text("\n".join(lines) + "\n", encoding="ascii")
 
 
+#: fuzz_tcp_framing.py's input header: frames up to 64 KiB, the stream in one read (split_input).
+TCP_HEADER = b"\x00\x00"
+
+
 def write(folder: Path, items: list[bytes]) -> int:
     folder.mkdir(parents=True, exist_ok=True)
     for item in items:
@@ -125,7 +142,7 @@ def main(argv: list[str]) -> int:
     out = Path(argv[0])
     packets = datagrams()
     n = write(out / "datagram", packets)
-    m = write(out / "tcp", streams(packets))
+    m = write(out / "tcp", [TCP_HEADER + stream for stream in streams(packets)])
     write_dictionary(out / "datagram.dict", dictionary())
     print(f"seeds: {n} datagrams, {m} TCP streams from docs/osc.md in {out}")
     return 0
