@@ -409,3 +409,44 @@ def test_without_the_sounddevice_package_serve_falls_back_in_one_line(installed)
     assert refused.returncode != 0
     last = refused.stderr.strip().splitlines()[-1]
     assert last.startswith("vibsynth: error: ") and says in last
+
+
+def _second_python() -> str | None:
+    """A CPython other than the one running the tests (3.12 beside 3.11, or 3.11 beside 3.12)."""
+    version = "3.12" if sys.version_info[:2] != (3, 12) else "3.11"
+    candidates = [
+        str(p) for p in sorted((Path.home() / ".pyenv" / "versions").glob(f"{version}.*/bin/python{version}"))
+    ]
+    candidates.append(shutil.which(f"python{version}") or "")
+    for candidate in candidates:
+        works = candidate and subprocess.run([candidate, "-c", ""], capture_output=True, timeout=60).returncode == 0
+        if works:
+            return candidate
+    return None
+
+
+def test_the_same_wheel_runs_on_a_second_python(installed):
+    """One wheel for every supported Python needs the stable ABI (issue 32 item 1): until the
+    extensions build with Py_LIMITED_API the wheel is tagged for one Python and this skips."""
+    tag = installed.wheel.name.removesuffix(".whl").split("-")[-2]
+    if tag != "abi3":
+        pytest.skip(f"the wheel is {tag}, not abi3: one Python only until the limited-API build (issue 32 item 1)")
+    python = _second_python()
+    assert python, "no second CPython (python3.12) to install the abi3 wheel into"
+    venv = installed.work.parent / "venv2"
+    subprocess.run([python, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=60)
+    pip = [sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"), "install", "-q", "--no-cache-dir"]
+    done = subprocess.run(
+        [*pip, "--no-compile", "--only-binary=:all:", str(installed.wheel)],
+        env=installed.env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, f"pip install failed:\n{done.stdout}\n{done.stderr}"
+    second = Installed(installed.wheel, venv, installed.work, installed.env, {})
+    from vibsynth._version import __version__
+
+    assert second.run("--version").stdout.strip() == f"vibsynth {__version__}"
+    second.run(*RENDER, "-o", "second.wav")
+    assert second.run("analyze", "second.wav").stdout.count("second.wav") == 1

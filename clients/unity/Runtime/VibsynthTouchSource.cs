@@ -112,6 +112,9 @@ namespace Vibsynth.Unity
             {
                 send();
             }
+            catch (ObjectDisposedException) // the connection closed first (leaving the scene): nothing to tell
+            {
+            }
             catch (Exception e) // a network error is logged, never thrown into Update
             {
                 Debug.LogWarning("VibsynthTouchSource: " + e.Message);
