@@ -77,7 +77,7 @@ left=$(echo "$targets" | wc -w)
 status=0
 for target in $targets; do
   cmd=$(runner "$target")
-  per=$(( (seconds - (SECONDS - start)) / left - 4 ))  # 4 s: a target's start-up and its corpus's first run
+  per=$(( (seconds - (SECONDS - start)) / left - 6 ))  # 6 s: a target's start-up, its corpus's first run, its stats
   [ "$per" -ge 5 ] || per=5
   left=$(( left - 1 ))
   work="$out/work/$target" artifacts="$out/artifacts/$target" log="$out/$target.log"
