@@ -15,8 +15,9 @@ apt_packages="libportaudio2 jackd2 liblo-tools python3-venv python3-dev gcc"
 [ -n "$extras" ] && apt_packages="$apt_packages chromium chromium-driver mono-mcs mono-runtime iproute2"
 # --test: clang and libFuzzer (Debian 12's clang 14 ships it in libclang-rt-14-dev) for scripts/fuzz.sh.
 [ -n "$extras" ] && apt_packages="$apt_packages clang libclang-rt-14-dev"
-# --test: real sounds for the follow tests (speech, spoken channel names, desktop effects and their Ogg decoder).
-[ -n "$extras" ] && apt_packages="$apt_packages espeak-ng alsa-utils sound-theme-freedesktop vorbis-tools"
+# --test: real sounds for the follow tests (speech, spoken channel names, desktop effects, recorded drum
+# loops in lmms-common's samples/beats, and their Ogg decoder).
+[ -n "$extras" ] && apt_packages="$apt_packages espeak-ng alsa-utils sound-theme-freedesktop vorbis-tools lmms-common"
 missing=""
 for p in $apt_packages; do
   dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"
