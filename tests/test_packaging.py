@@ -108,8 +108,11 @@ def _tracked(under: str = "") -> list[str]:
 
 
 def _clean_env(folder: Path) -> dict[str, str]:
-    """No VIBSYNTH_* of the caller, HOME and XDG folders inside ``folder``, no compiler."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("VIBSYNTH_", "PYTHON", "VIRTUAL_ENV", "PIP_"))}
+    """No VIBSYNTH_* of the caller, HOME and XDG folders inside ``folder``, no compiler.
+
+    The PIP_* variables stay: they are how this machine reaches the package index.
+    """
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("VIBSYNTH_", "PYTHON", "VIRTUAL_ENV"))}
     for key in ("HOME", "XDG_CONFIG_HOME", "XDG_DATA_HOME", "XDG_CACHE_HOME", "XDG_STATE_HOME"):
         env[key] = str(folder / key.lower())
     env.update(CC="/bin/false", CXX="/bin/false", PIP_DISABLE_PIP_VERSION_CHECK="1")
@@ -139,13 +142,14 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
     with open(log, "w") as out:
         deps = subprocess.Popen([*pip, *dependencies], env=env, stdout=out, stderr=subprocess.STDOUT)
     try:
-        subprocess.run(
+        built = subprocess.run(
             [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(base / "dist"), str(source)],
             env={**env, "CC": os.environ.get("CC", "cc"), "CXX": os.environ.get("CXX", "c++")},  # this step compiles
-            check=True,
             capture_output=True,
+            text=True,
             timeout=240,
         )
+        assert built.returncode == 0, f"pip wheel failed:\n{built.stdout}\n{built.stderr}"
         seconds["build"] = time.monotonic() - started
         deps.wait(timeout=300)
     finally:
