@@ -335,6 +335,18 @@ def test_serve_answers_osc_serves_the_studio_and_the_oscquery_tree(installed):
         for path in files:  # every script the page's modules import, and the style sheet
             served = _get(f"{studio.group(1)}/static/{path.relative_to(static).as_posix()}", TOKEN)
             assert served == path.read_bytes(), path
+        # the tabs other parts add (clips, lab, calibrate): their scripts and the lab's styles
+        state = json.loads(_get(studio.group(1) + "/api/state", TOKEN))
+        app = ROOT / "vibsynth" / "app"
+        shipped = {
+            "/ext/clips/tab.js": app / "clips" / "clip_tab.js",
+            "/ext/lab/tab.js": app / "lab" / "static" / "lab_tab.js",
+            "/ext/calibrate/tab.js": app / "lab" / "static" / "calibrate_tab.js",
+            "/ext/lab/lab.css": app / "lab" / "static" / "lab.css",
+        }
+        assert sorted(e["script"] for e in state["extensions"]) == sorted(u for u in shipped if u.endswith(".js"))
+        for url, path in shipped.items():
+            assert _get(studio.group(1) + url, TOKEN) == path.read_bytes(), url
         with pytest.raises(urllib.error.HTTPError):  # the token is still required
             _get(studio.group(1) + "/static/studio.css")
 
