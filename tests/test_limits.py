@@ -283,3 +283,15 @@ def test_a_preset_glide_is_one_the_controller_takes(bank):
     for value in span.beyond():
         with pytest.raises(ParameterError):
             _glide(bank, value)
+
+
+def test_the_engine_refuses_the_ramps_the_compiled_core_would(bank):
+    """``limits.ENGINE_RAMP_MAX_S`` is the core's own bound (``MAX_GLIDE_S``): the longest glide and mute
+    fade both accept, and one beyond is the project's ParameterError from the Engine, never the core's
+    ValueError."""
+    top = limits.ENGINE_RAMP_MAX_S
+    engine = Engine(bank, glide_s=top, mute_fade_s=top, max_block=128)
+    assert engine.mute_fade_s == top
+    for kwargs in ({"glide_s": math.nextafter(top, math.inf)}, {"mute_fade_s": top * 2}, {"glide_s": -1e-9}):
+        with pytest.raises(ParameterError, match=r"must be in \[0, 3600\] s"):
+            Engine(bank, max_block=128, **kwargs)

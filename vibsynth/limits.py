@@ -16,6 +16,7 @@ __all__ = [
     "SCHEDULE_CAPACITY_MAX",
     "BANK_LEVELS_MAX",
     "GLIDE_MAX_MS",
+    "ENGINE_RAMP_MAX_S",
     "CLIP_GAIN_MAX",
     "CLIP_RATE_MIN",
     "CLIP_RATE_MAX",
@@ -38,6 +39,10 @@ SCHEDULE_CAPACITY_MAX = 1_000_000
 BANK_LEVELS_MAX = 4096
 #: Longest knob glide (ms): ``knobs.glide_ms``, and every glide a control asks for.
 GLIDE_MAX_MS = 10_000
+#: Longest glide or mute fade the compiled core accepts at all (``MAX_GLIDE_S`` in
+#: ``engine/_core.c``): the ``Engine`` refuses longer ones with a ParameterError before the core
+#: would with a ValueError (``tests/test_limits.py`` checks the built core agrees).
+ENGINE_RAMP_MAX_S = 3600.0
 #: Clip playback (``/vibsynth/play``, ``vibsynth clip play``, ``midi_clips.notes``): largest gain
 #: (intensity x gain is clamped to 1 anyway), rate range (time stretch; 1 = as designed), and
 #: most loop passes one play may ask for (0 = until stopped).

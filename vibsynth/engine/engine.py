@@ -82,6 +82,7 @@ from vibsynth.errors import EngineBusyError, ParameterError, ScheduleFullError
 from vibsynth.limits import (
     ACTUATOR_BOOST_MAX_DB,
     BANK_LEVELS_MAX,
+    ENGINE_RAMP_MAX_S,
     MAX_CHANNELS,
     SCHEDULE_CAPACITY_MAX,
     VOICE_GAIN_MAX,
@@ -237,8 +238,10 @@ class Engine:
                 raise ParameterError(f"{name} must be finite, got {value!r}")
         if range_db <= 0:
             raise ParameterError(f"range_db must be > 0, got {range_db}")
-        if glide_s < 0 or mute_fade_s < 0:
-            raise ParameterError("glide and mute fade must be >= 0")
+        if not (0 <= glide_s <= ENGINE_RAMP_MAX_S and 0 <= mute_fade_s <= ENGINE_RAMP_MAX_S):
+            raise ParameterError(
+                f"glide_s and mute_fade_s must be in [0, {ENGINE_RAMP_MAX_S:g}] s, got {glide_s!r} and {mute_fade_s!r}"
+            )
         if not 0 < limiter_ceiling <= 1:
             raise ParameterError(f"limiter_ceiling must be in (0, 1], got {limiter_ceiling}")
         if not 0.0 <= initial_intensity <= 1.0:

@@ -253,3 +253,33 @@ def test_osc_receive_priority_setting_reaches_the_receive_loop():
     assert load_config(overrides={"osc": {"receive_priority": 9}}).settings.osc.receive_priority == 9
     with pytest.raises(ConfigError, match="receive_priority"):
         load_config(overrides={"osc": {"receive_priority": 10}})
+
+
+def test_a_receive_loop_that_fails_is_logged_once_and_counted(caplog):
+    """The compiled loop ends with OSError on a descriptor that is not a socket (a persistent error,
+    not one bad datagram): the transport says so in one line, counts it, and its thread ends."""
+    import logging
+
+    from vibsynth.control.osc.fast import make_receiver
+
+    read_fd, write_fd = os.pipe()
+    os.write(write_fd, b"x")  # readable: the loop's recvfrom meets ENOTSOCK
+    try:
+        udp = UdpTransport(
+            "127.0.0.1",
+            0,
+            _Batches(),
+            receiver_factory=lambda fd, on_slow, allow: make_receiver(read_fd, on_slow, allow),
+        )
+        with caplog.at_level(logging.ERROR, logger="vibsynth.control.osc"):
+            udp.start()
+            assert udp._thread is not None
+            udp._thread.join(timeout=10)
+            assert not udp._thread.is_alive()
+        udp.stop()
+        assert udp.stats.receive_failed == 1
+        lines = [r.getMessage() for r in caplog.records if "receive loop" in r.getMessage()]
+        assert len(lines) == 1 and f"port {udp.port} stopped" in lines[0], lines
+    finally:
+        os.close(read_fd)
+        os.close(write_fd)

@@ -130,7 +130,11 @@ class OscServer:
 
     def _status_extras(self) -> list[tuple[str, object]]:
         s = self.stats
-        return self._transport_status() + [("tcp_refused", s.tcp_refused), ("tcp_idle_closed", s.tcp_idle_closed)]
+        return self._transport_status() + [
+            ("tcp_refused", s.tcp_refused),
+            ("tcp_idle_closed", s.tcp_idle_closed),
+            ("receive_failed", s.receive_failed),
+        ]
 
     def counters(self) -> dict[str, int]:
         """Transport counters of both transports: the TCP ones in :attr:`stats`, the UDP ones in

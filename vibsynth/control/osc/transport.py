@@ -117,6 +117,7 @@ class TransportStats:
     handler_errors: int = 0
     tcp_refused: int = 0
     tcp_idle_closed: int = 0
+    receive_failed: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -438,7 +439,11 @@ class UdpTransport:
         self.realtime = _realtime(self.priority)
         self._scheduled.set()
         if receiver is not None:
-            receiver.run()  # the compiled loop; returns after stop()
+            try:
+                receiver.run()  # the compiled loop; returns after stop()
+            except OSError as exc:  # the socket itself failed (not one bad datagram): say so once, count it
+                self.stats.receive_failed += 1
+                log.error("OSC: the UDP receive loop on port %s stopped: %s", self.port, exc)
 
     def counters(self) -> dict[str, int]:
         """The receive loop's counters: packets, bytes, fast (handled in C), slow, denied, ..."""
