@@ -58,6 +58,7 @@
 #include <Python.h>
 #include <pythread.h>
 #include <math.h>
+#include <stdlib.h> /* malloc/calloc/free: Python.h leaves it out of limited-API builds */
 #include <stdint.h>
 #include <string.h>
 
@@ -590,13 +591,15 @@ static int not_ready(const Core *self) {
 }
 
 static void Core_dealloc(Core *self) {
+    PyTypeObject *type = Py_TYPE((PyObject *)self);
     if (self->sig.obj) PyBuffer_Release(&self->sig);
     if (self->peaks_buf.obj) PyBuffer_Release(&self->peaks_buf);
-    PyMem_RawFree(self->ring);
-    PyMem_RawFree(self->heap);
-    PyMem_RawFree(self->tap);
+    free(self->ring);
+    free(self->heap);
+    free(self->tap);
     if (self->plock) PyThread_free_lock(self->plock);
-    Py_TYPE(self)->tp_free((PyObject *)self);
+    ((freefunc)PyType_GetSlot(type, Py_tp_free))(self);
+    Py_DECREF(type); /* a heap type: each instance holds a reference to it */
 }
 
 /* 0, or -1 with a ValueError naming `name` unless lo <= x <= hi (NaN fails). */
@@ -703,9 +706,9 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
         if (off == -1 && PyErr_Occurred()) goto fail;
         read_idx[ch] = ((off % n) + n) % n;
     }
-    ring = PyMem_RawCalloc((size_t)ring_cap, sizeof(cmd_t));
-    heap = PyMem_RawCalloc((size_t)sched_cap, sizeof(cmd_t));
-    tap = PyMem_RawCalloc((size_t)TAP_FRAMES * (size_t)nch, sizeof(float));
+    ring = calloc((size_t)ring_cap, sizeof(cmd_t));
+    heap = calloc((size_t)sched_cap, sizeof(cmd_t));
+    tap = calloc((size_t)TAP_FRAMES * (size_t)nch, sizeof(float));
     lock = PyThread_allocate_lock();
     if (!ring || !heap || !tap || !lock) {
         PyErr_NoMemory();
@@ -763,9 +766,9 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
 fail:
     if (sig.obj) PyBuffer_Release(&sig);
     if (pk.obj) PyBuffer_Release(&pk);
-    PyMem_RawFree(ring);
-    PyMem_RawFree(heap);
-    PyMem_RawFree(tap);
+    free(ring);
+    free(heap);
+    free(tap);
     if (lock) PyThread_free_lock(lock);
     return -1;
 }
@@ -889,7 +892,7 @@ static PyObject *Core_knob_values(Core *self, PyObject *unused) {
             Py_DECREF(list);
             return NULL;
         }
-        PyList_SET_ITEM(list, ch, t);
+        PyList_SetItem(list, ch, t);
     }
     return list;
 }
@@ -944,7 +947,7 @@ static PyObject *Core_trim_values(Core *self, PyObject *unused) {
             Py_DECREF(list);
             return NULL;
         }
-        PyList_SET_ITEM(list, ch, v);
+        PyList_SetItem(list, ch, v);
     }
     return list;
 }
@@ -960,7 +963,7 @@ static PyObject *Core_voice_ids(Core *self, PyObject *unused) {
             Py_DECREF(list);
             return NULL;
         }
-        PyList_SET_ITEM(list, ch, v);
+        PyList_SetItem(list, ch, v);
     }
     return list;
 }
@@ -976,7 +979,7 @@ static PyObject *Core_layers(Core *self, PyObject *unused) {
             Py_DECREF(list);
             return NULL;
         }
-        PyList_SET_ITEM(list, ch, v);
+        PyList_SetItem(list, ch, v);
     }
     return list;
 }
@@ -1104,17 +1107,20 @@ static PyMethodDef Core_methods[] = {
      "(first frame, adc, current, dac, monotonic) of the last PortAudio output block, or None"},
     {NULL}};
 
-static PyTypeObject CoreType = {
-    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "vibsynth.engine._core.Core",
-    .tp_basicsize = sizeof(Core),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_doc = "Real-time engine state, command ring, scheduler and PortAudio callback.",
-    .tp_new = PyType_GenericNew,
-    .tp_init = (initproc)Core_init,
-    .tp_dealloc = (destructor)Core_dealloc,
-    .tp_methods = Core_methods,
-    .tp_getset = Core_getset,
-};
+/* A heap type (the limited API has no static PyTypeObject), made once by PyInit__core and kept for
+ * the process's life (the module is single-phase: it is never made twice). Immutable, like a static
+ * type: its methods and attributes cannot be replaced from Python. */
+static PyType_Slot Core_slots[] = {
+    {Py_tp_doc, (void *)"Real-time engine state, command ring, scheduler and PortAudio callback."},
+    {Py_tp_new, (void *)PyType_GenericNew},
+    {Py_tp_init, (void *)Core_init},
+    {Py_tp_dealloc, (void *)Core_dealloc},
+    {Py_tp_methods, Core_methods},
+    {Py_tp_getset, Core_getset},
+    {0, NULL}};
+static PyType_Spec Core_spec = {"vibsynth.engine._core.Core", sizeof(Core), 0,
+                                Py_TPFLAGS_DEFAULT | Py_TPFLAGS_IMMUTABLETYPE, Core_slots};
+static PyTypeObject *CoreType;
 
 /* C producers (the OSC fast path) reach core_push through this capsule. */
 static int core_channels(Core *c) { return c->channels; }
@@ -1124,12 +1130,15 @@ static vs_core_api_t core_api = {core_push, core_channels, NULL, core_ready};
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_core", "vibsynth real-time core", -1, NULL};
 
 PyMODINIT_FUNC PyInit__core(void) {
-    if (PyType_Ready(&CoreType) < 0) return NULL;
-    core_api.core_type = &CoreType;
+    if (!CoreType) CoreType = (PyTypeObject *)PyType_FromSpec(&Core_spec);
+    if (!CoreType) return NULL;
+    core_api.core_type = CoreType; /* what the fast path's Receiver checks its core against */
     PyObject *m = PyModule_Create(&module);
     if (!m) return NULL;
-    Py_INCREF(&CoreType);
-    if (PyModule_AddObject(m, "Core", (PyObject *)&CoreType) < 0) return NULL;
+    if (PyModule_AddObjectRef(m, "Core", (PyObject *)CoreType) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
     PyModule_AddIntConstant(m, "CMD_KNOB", CMD_KNOB);
     PyModule_AddIntConstant(m, "CMD_GLIDE", CMD_GLIDE);
     PyModule_AddIntConstant(m, "CMD_MUTE", CMD_MUTE);

@@ -29,6 +29,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <stdlib.h> /* malloc/calloc/free: Python.h leaves it out of limited-API builds */
 #include <stdint.h>
 #include <string.h>
 
@@ -116,8 +117,10 @@ static int not_ready(const Ring *self) {
 }
 
 static void Ring_dealloc(Ring *self) {
-    PyMem_RawFree(self->buf);
-    Py_TYPE(self)->tp_free((PyObject *)self);
+    PyTypeObject *type = Py_TYPE((PyObject *)self);
+    free(self->buf);
+    ((freefunc)PyType_GetSlot(type, Py_tp_free))(self);
+    Py_DECREF(type); /* a heap type: each instance holds a reference to it */
 }
 
 static int Ring_init(Ring *self, PyObject *args, PyObject *kw) {
@@ -147,7 +150,7 @@ static int Ring_init(Ring *self, PyObject *args, PyObject *kw) {
     for (int ch = 0; ch < channels; ch++) self->cols[ch] = ch;
     self->cap = cap;
     self->fs = fs;
-    self->buf = PyMem_RawCalloc((size_t)cap * (size_t)channels, sizeof(float));
+    self->buf = calloc((size_t)cap * (size_t)channels, sizeof(float));
     if (!self->buf) {
         PyErr_NoMemory();
         return -1;
@@ -315,7 +318,7 @@ static PyObject *Ring_take_peaks(Ring *self, PyObject *unused) {
             Py_DECREF(list);
             return NULL;
         }
-        PyList_SET_ITEM(list, ch, v);
+        PyList_SetItem(list, ch, v);
     }
     return list;
 }
@@ -391,26 +394,29 @@ static PyMethodDef Ring_methods[] = {
     {"take_load_peak", (PyCFunction)Ring_take_load_peak, METH_NOARGS, "peak load since the last call (resets)"},
     {NULL}};
 
-static PyTypeObject RingType = {
-    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "vibsynth.engine._input.InputRing",
-    .tp_basicsize = sizeof(Ring),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_doc = "InputRing(channels, capacity, fs): lock-free input ring and its PortAudio callback.",
-    .tp_new = PyType_GenericNew,
-    .tp_init = (initproc)Ring_init,
-    .tp_dealloc = (destructor)Ring_dealloc,
-    .tp_methods = Ring_methods,
-    .tp_getset = Ring_getset,
-};
+/* A heap type (the limited API has no static PyTypeObject), immutable like a static one. */
+static PyType_Slot Ring_slots[] = {
+    {Py_tp_doc, (void *)"InputRing(channels, capacity, fs): lock-free input ring and its PortAudio callback."},
+    {Py_tp_new, (void *)PyType_GenericNew},
+    {Py_tp_init, (void *)Ring_init},
+    {Py_tp_dealloc, (void *)Ring_dealloc},
+    {Py_tp_methods, Ring_methods},
+    {Py_tp_getset, Ring_getset},
+    {0, NULL}};
+static PyType_Spec Ring_spec = {"vibsynth.engine._input.InputRing", sizeof(Ring), 0,
+                                Py_TPFLAGS_DEFAULT | Py_TPFLAGS_IMMUTABLETYPE, Ring_slots};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_input", "vibsynth real-time input ring", -1, NULL};
 
 PyMODINIT_FUNC PyInit__input(void) {
-    if (PyType_Ready(&RingType) < 0) return NULL;
     PyObject *m = PyModule_Create(&module);
     if (!m) return NULL;
-    Py_INCREF(&RingType);
-    if (PyModule_AddObject(m, "InputRing", (PyObject *)&RingType) < 0) return NULL;
+    PyObject *type = PyType_FromSpec(&Ring_spec);
+    if (!type || PyModule_AddObject(m, "InputRing", type) < 0) { /* (AddObject steals on success only) */
+        Py_XDECREF(type);
+        Py_DECREF(m);
+        return NULL;
+    }
     PyModule_AddIntConstant(m, "MAX_CHANNELS", IN_MAXCH);
     PyModule_AddIntConstant(m, "PA_INPUT_UNDERFLOW", (long)PA_INPUT_UNDERFLOW);
     PyModule_AddIntConstant(m, "PA_INPUT_OVERFLOW", (long)PA_INPUT_OVERFLOW);

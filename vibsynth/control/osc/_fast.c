@@ -43,6 +43,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <stdlib.h> /* malloc/calloc/free: Python.h leaves it out of limited-API builds */
 #include <stdint.h>
 #include <string.h>
 
@@ -321,7 +322,7 @@ static PyObject *seen_list(Receiver *r) {
         const seen_t *s = &r->seen[k];
         PyObject *t = Py_BuildValue("(y#Nd)", (const char *)s->data, (Py_ssize_t)s->len, peer_tuple(&s->addr), s->when);
         if (!t) Py_CLEAR(list);
-        else PyList_SET_ITEM(list, k, t);
+        else PyList_SetItem(list, k, t);
     }
     r->n_seen = 0;
     return list;
@@ -388,7 +389,7 @@ static void dispatch_slow(Receiver *r) {
             Py_DECREF(list);
             goto fail;
         }
-        PyList_SET_ITEM(list, k, t);
+        PyList_SetItem(list, k, t);
     }
     r->slow += r->n_slow;
     r->n_slow = 0;
@@ -602,6 +603,14 @@ static PyObject *Receiver_stop(Receiver *r, PyObject *unused) {
 }
 
 /* ------------------------------------------------------------------ construction */
+/* *slot = a new reference to value, then the old one released (Py_XSETREF, not in the limited API). */
+static void set_ref(PyObject **slot, PyObject *value) {
+    PyObject *old = *slot;
+    Py_INCREF(value);
+    *slot = value;
+    Py_XDECREF(old);
+}
+
 static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
     static char *names[] = {"fd",      "core",     "table", "balance_min", "balance_max",
                             "on_slow", "on_state", "allow", "watch",       NULL};
@@ -658,12 +667,9 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
         r->core_ptr = (struct vs_core *)core;
         r->channels = api->channels(r->core_ptr);
     }
-    Py_INCREF(core);
-    Py_XSETREF(r->core, core);
-    Py_INCREF(on_slow);
-    Py_XSETREF(r->on_slow, on_slow);
-    Py_INCREF(on_state);
-    Py_XSETREF(r->on_state, on_state);
+    set_ref(&r->core, core);
+    set_ref(&r->on_slow, on_slow);
+    set_ref(&r->on_state, on_state);
     /* table: iterable of (address: bytes, method: int, channel: int) */
     memset(r->table, 0, sizeof r->table);
     PyObject *it = PyObject_GetIter(table);
@@ -722,9 +728,9 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
         Py_DECREF(it);
         if (PyErr_Occurred()) return -1;
     }
-    if (!r->scratch) r->scratch = PyMem_RawMalloc(MAX_DATAGRAM);
-    if (!r->arena) r->arena = PyMem_RawMalloc(SLOW_ARENA);
-    if (!r->seen) r->seen = PyMem_RawMalloc(MAX_SEEN * sizeof(seen_t));
+    if (!r->scratch) r->scratch = malloc(MAX_DATAGRAM);
+    if (!r->arena) r->arena = malloc(SLOW_ARENA);
+    if (!r->seen) r->seen = malloc(MAX_SEEN * sizeof(seen_t));
     if (!r->scratch || !r->arena || !r->seen) {
         PyErr_NoMemory();
         return -1;
@@ -734,14 +740,16 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
 }
 
 static void Receiver_dealloc(Receiver *r) {
+    PyTypeObject *type = Py_TYPE((PyObject *)r);
     Py_XDECREF(r->core);
     Py_XDECREF(r->on_slow);
     Py_XDECREF(r->on_state);
     if (r->watch_view.obj) PyBuffer_Release(&r->watch_view);
-    PyMem_RawFree(r->scratch);
-    PyMem_RawFree(r->arena);
-    PyMem_RawFree(r->seen);
-    Py_TYPE(r)->tp_free((PyObject *)r);
+    free(r->scratch);
+    free(r->arena);
+    free(r->seen);
+    ((freefunc)PyType_GetSlot(type, Py_tp_free))(r);
+    Py_DECREF(type); /* a heap type: each instance holds a reference to it */
 }
 
 static PyObject *Receiver_counters(Receiver *r, PyObject *unused) {
@@ -760,25 +768,28 @@ static PyMethodDef Receiver_methods[] = {
      "packets, bytes, fast, slow, denied, ring_full, handler_errors, recv_errors"},
     {NULL}};
 
-static PyTypeObject ReceiverType = {
-    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "vibsynth.control.osc._fast.Receiver",
-    .tp_basicsize = sizeof(Receiver),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_doc = "OSC UDP receive loop with a compiled fast path for knob messages.",
-    .tp_new = PyType_GenericNew,
-    .tp_init = (initproc)Receiver_init,
-    .tp_dealloc = (destructor)Receiver_dealloc,
-    .tp_methods = Receiver_methods,
-};
+/* A heap type (the limited API has no static PyTypeObject), immutable like a static one. */
+static PyType_Slot Receiver_slots[] = {
+    {Py_tp_doc, (void *)"OSC UDP receive loop with a compiled fast path for knob messages."},
+    {Py_tp_new, (void *)PyType_GenericNew},
+    {Py_tp_init, (void *)Receiver_init},
+    {Py_tp_dealloc, (void *)Receiver_dealloc},
+    {Py_tp_methods, Receiver_methods},
+    {0, NULL}};
+static PyType_Spec Receiver_spec = {"vibsynth.control.osc._fast.Receiver", sizeof(Receiver), 0,
+                                    Py_TPFLAGS_DEFAULT | Py_TPFLAGS_IMMUTABLETYPE, Receiver_slots};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_fast", "OSC UDP fast path", -1, NULL};
 
 PyMODINIT_FUNC PyInit__fast(void) {
-    if (PyType_Ready(&ReceiverType) < 0) return NULL;
     PyObject *m = PyModule_Create(&module);
     if (!m) return NULL;
-    Py_INCREF(&ReceiverType);
-    PyModule_AddObject(m, "Receiver", (PyObject *)&ReceiverType);
+    PyObject *type = PyType_FromSpec(&Receiver_spec);
+    if (!type || PyModule_AddObject(m, "Receiver", type) < 0) { /* (AddObject steals on success only) */
+        Py_XDECREF(type);
+        Py_DECREF(m);
+        return NULL;
+    }
     PyModule_AddIntConstant(m, "M_INTENSITY", M_INTENSITY);
     PyModule_AddIntConstant(m, "M_BALANCE", M_BALANCE);
     PyModule_AddIntConstant(m, "M_TEXTURE", M_TEXTURE);
