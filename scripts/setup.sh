@@ -18,6 +18,8 @@ apt_packages="libportaudio2 jackd2 liblo-tools python3-venv python3-dev gcc"
 # --test: real sounds for the follow tests (speech, spoken channel names, desktop effects, recorded drum
 # loops in lmms-common's samples/beats, and their Ogg decoder).
 [ -n "$extras" ] && apt_packages="$apt_packages espeak-ng alsa-utils sound-theme-freedesktop vorbis-tools lmms-common"
+# --test: mingw-w64 to cross-build the Windows wheel (scripts/wheels.sh windows; tests/scripts/test_wheels.py).
+[ -n "$extras" ] && apt_packages="$apt_packages gcc-mingw-w64-x86-64-win32"
 missing=""
 for p in $apt_packages; do
   dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"
