@@ -13,6 +13,7 @@ file's extensions and ``GCC_FLAGS`` for the Windows and macOS cross-builds.
 
 import os
 import sys
+from pathlib import Path
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
@@ -30,6 +31,16 @@ class BuildExt(build_ext):
         for ext in self.extensions:
             ext.extra_compile_args = flags
         super().build_extensions()
+
+    def run(self) -> None:
+        super().run()
+        if not self.inplace:
+            return
+        for ext in self.extensions:  # an import prefers a stale _core.cpython-311-....so to the new _core.abi3.so
+            built = Path(self.get_ext_fullpath(ext.name))
+            for other in built.parent.glob(ext.name.rsplit(".", 1)[1] + ".*"):
+                if other.suffix in (".so", ".pyd") and other != built:
+                    other.unlink()
 
 
 def extension(name: str, sources: list[str], **kw) -> Extension:

@@ -185,3 +185,6 @@ def test_the_release_workflow_builds_every_platform_and_runs_the_smoke_script():
     assert "python -m build --sdist" in jobs["sdist"]["steps"][-2]["run"]
     for path in ("scripts/smoke.py", "scripts/vibsynth-app.spec", "scripts/app/vibsynth_app.py"):
         assert (ROOT / path).is_file(), path
+    spec = (ROOT / "scripts" / "vibsynth-app.spec").read_text()
+    compile(spec, "vibsynth-app.spec", "exec")  # PyInstaller runs it as Python
+    assert 'collect_submodules("vibsynth")' in spec and 'collect_data_files("vibsynth")' in spec
