@@ -18,7 +18,7 @@ from typing import Any
 
 from aiohttp import WebSocketError, WSCloseCode, web
 
-__all__ = ["UnmaskedFrame", "MaskGuard", "StrictWebSocketResponse"]
+__all__ = ["UnmaskedFrame", "MaskGuard", "StrictWebSocketResponse", "accept"]
 
 
 class UnmaskedFrame(WebSocketError):
@@ -131,3 +131,18 @@ class StrictWebSocketResponse(web.WebSocketResponse):
         super()._post_start(_GuardedRequest(request, self), *args, **kwargs)  # type: ignore[arg-type]
         if self.mask_guard is None:  # aiohttp changed how it installs its reader: fail loudly, not open
             raise RuntimeError("the WebSocket mask check could not be installed (aiohttp changed)")
+
+
+async def accept(ws: web.WebSocketResponse, request: web.Request) -> bool:
+    """Answer the upgrade request; False when the client was gone before the answer was written.
+
+    A client that sends its upgrade request and resets the connection makes ``prepare`` raise a
+    ConnectionError (aiohttp's ClientConnectionResetError is one): there is nobody to answer, it
+    is no bad input and no fault of the server, so the caller just ends the request quietly
+    (aiohttp logged it as an error with a traceback).
+    """
+    try:
+        await ws.prepare(request)
+    except ConnectionError:
+        return False
+    return True

@@ -451,3 +451,30 @@ def test_each_framing_must_closes_the_socket_and_is_counted(server, ctl, case):
     assert close_code(got) == code
     assert _wait_refused(server, reason) == 1 and not server.clients
     assert server.pushed == 0 and dict(server.status_pairs())["oscquery_listens"] == 0
+
+
+def test_a_client_that_resets_during_the_handshake_leaves_no_traceback(server, ctl, caplog):
+    """A client that sends its upgrade request and resets the connection at once (seen by the soak:
+    ``ws.prepare`` met ConnectionResetError and aiohttp logged 'Error handling request' with a
+    traceback): nothing is logged above debug, nothing is counted as bad input, and the server
+    goes on serving."""
+    import logging
+    import socket
+    import struct
+
+    before = ctl.stats().get("errors", 0) if hasattr(ctl, "stats") else None
+    with caplog.at_level(logging.DEBUG):
+        for _ in range(20):
+            sock = socket.create_connection(("127.0.0.1", server.port))
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # close = RST
+            sock.sendall(handshake(server.port))
+            sock.close()
+        time.sleep(0.5)
+        status, _ = get(server, "/vibsynth/intensity?VALUE")
+    assert status == 200
+    loud = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert not loud, [r.getMessage() for r in loud]
+    assert not any(r.exc_info for r in caplog.records)
+    assert sum(server.refused().values()) == 0
+    if before is not None:
+        assert ctl.stats().get("errors", 0) == before

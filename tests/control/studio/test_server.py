@@ -392,3 +392,28 @@ def test_an_unmasked_page_frame_closes_the_socket_with_1002_and_is_not_applied(s
     assert b'"ack"' not in b"".join(payload for _, payload in frames)  # hello and its like, no answer to the move
     assert get_json(studio, "/api/status")["studio"]["refused"]["unmasked"] == 1
     assert controller.state()[0].intensity == 0.0
+
+
+def test_a_page_that_resets_during_the_handshake_leaves_no_traceback(studio, caplog):
+    """A page that sends its upgrade request and resets at once (the soak's vanishing clients): no
+    'studio: GET /ws failed' traceback, nothing refused, and the studio goes on serving."""
+    import logging
+    import socket
+    import struct
+    import time
+
+    from tests.control.studio.helpers import origin
+    from tests.control.websocket_frames import handshake
+
+    with caplog.at_level(logging.DEBUG):
+        for _ in range(20):
+            sock = socket.create_connection(("127.0.0.1", studio.port), timeout=10)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # close = RST
+            sock.sendall(handshake(studio.port, f"/ws?token={studio.token}", origin(studio)))
+            sock.close()
+        time.sleep(0.5)
+        status = get_json(studio, "/api/status")
+    loud = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert not loud, [r.getMessage() for r in loud]
+    assert not any(r.exc_info for r in caplog.records)
+    assert not any(status["studio"]["refused"].values())

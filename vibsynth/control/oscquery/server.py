@@ -46,7 +46,7 @@ from vibsynth.control.osc.codec import encode_message
 from vibsynth.control.osc.handler import OscHandler
 from vibsynth.control.oscquery.tree import ATTRIBUTES, Tree
 from vibsynth.control.studio.commands import Throttle
-from vibsynth.control.websocket import StrictWebSocketResponse, UnmaskedFrame
+from vibsynth.control.websocket import StrictWebSocketResponse, UnmaskedFrame, accept
 from vibsynth.errors import VibsynthError
 
 __all__ = [
@@ -383,7 +383,8 @@ class OscQueryServer(LoopServer):
         if len(self.clients) >= MAX_CLIENTS:
             return self._refuse("clients", 503, f"too many OSCQuery clients (max {MAX_CLIENTS})")
         ws = StrictWebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=20.0, compress=False)
-        await ws.prepare(request)
+        if not await accept(ws, request):  # the client reset during the handshake: nobody to answer
+            return web.Response(status=400)
         self._next_id += 1
         client = _Client(ws=ws, ident=self._next_id, remote=request.remote or "")
         self.clients.add(client)

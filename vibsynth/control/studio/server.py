@@ -46,7 +46,7 @@ from vibsynth.control.studio.commands import (
 from vibsynth.control.studio.extension import StudioExtension
 from vibsynth.control.studio.hub import Hub, Page
 from vibsynth.control.studio.security import BODY_CAP, Gate, new_token
-from vibsynth.control.websocket import StrictWebSocketResponse, UnmaskedFrame
+from vibsynth.control.websocket import StrictWebSocketResponse, UnmaskedFrame, accept
 from vibsynth.errors import ConfigError, VibsynthError
 
 __all__ = ["StudioServer", "MAX_PAGES", "UPLOAD_PATHS"]
@@ -309,7 +309,8 @@ class StudioServer(LoopServer):
         if len(self.hub.pages) >= MAX_PAGES:
             return self.gate.refuse("pages", 503, f"too many studio pages open (max {MAX_PAGES}); close one")
         ws = StrictWebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=20.0, compress=False)
-        await ws.prepare(request)
+        if not await accept(ws, request):  # the client reset during the handshake: nobody to answer
+            return web.Response(status=400)
         page = self.hub.attach(ws)
         self.hub.send_to(page, ("hello",), self.hello())
         self._pages_changed()
