@@ -404,3 +404,65 @@ class JackPlayer:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+_PLAYER_CHILD = r"""
+import sys
+import numpy as np
+from tests.e2e.jackutil import JackPlayer
+
+signal = np.load(sys.argv[1])
+with JackPlayer(n_ports=signal.shape[1], signal=signal) as player:
+    player.connect(sys.argv[2:])
+    player.play()
+    print("playing", flush=True)
+    sys.stdin.read()  # until the parent closes stdin
+print(f"gaps {player.gaps}", flush=True)
+"""
+
+
+class JackPlayerProcess:
+    """A :class:`JackPlayer` of ``signal`` (shape (frames, n_ports)) in a child process, playing into ``targets``.
+
+    On a synchronous JACK graph (``scripts/with_jack.sh``) a late client makes every cycle late:
+    a Python client in the test process waits for the GIL whenever the test's own thread runs,
+    and its lateness would be counted as the tested stream's underflows. In its own process it
+    waits for nobody. :attr:`gaps` (after :meth:`close`) counts the cycles it still missed.
+    """
+
+    def __init__(self, signal: np.ndarray, targets: Sequence[str], folder: os.PathLike[str] | str) -> None:
+        import sys
+        from pathlib import Path
+
+        path = Path(folder) / f"player-{os.getpid()}-{id(self)}.npy"
+        np.save(path, np.asarray(signal, dtype=np.float32).reshape(len(signal), -1))
+        root = Path(__file__).resolve().parents[2]
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", _PLAYER_CHILD, str(path), *targets],
+            cwd=root,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()
+        if line.strip() != "playing":
+            self.close()
+            raise AssertionError(f"the player process did not start: {line!r}")
+        self.gaps = -1
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                out, _ = self.proc.communicate(timeout=20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                out, _ = self.proc.communicate()
+            words = out.split()
+            self.gaps = int(words[-1]) if len(words) >= 2 and words[-2] == "gaps" else -1
+
+    def __enter__(self) -> JackPlayerProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -28,7 +28,15 @@ import numpy as np
 import pytest
 from scipy.io import wavfile
 
-from tests.e2e.jackutil import REALTIME, JackCapture, JackPlayer, assert_no_collapse, jack_ports, new_ports
+from tests.e2e.jackutil import (
+    REALTIME,
+    JackCapture,
+    JackPlayer,
+    JackPlayerProcess,
+    assert_no_collapse,
+    jack_ports,
+    new_ports,
+)
 from tests.e2e.test_osc_e2e import start_serve, stop_serve
 from vibsynth.app.client import Client
 
@@ -304,10 +312,10 @@ def test_following_a_stereo_input_keeps_the_audio_going(jack_server, tmp_path):
         for kind in ("alone", "follow"):
             served = Served(tmp_path / f"{kind}{k}", follow=None if kind == "alone" else "audio")
             try:
-                with JackPlayer(n_ports=2, signal=np.stack([signal, signal], axis=1)) as player:
-                    if served.in_ports:
-                        player.connect(served.in_ports)
-                    player.play()
+                # the player in its own process: on the synchronous graph an in-process Python client
+                # late for the GIL would make every client's cycle late (counted as serve's underflows)
+                stereo = np.stack([signal, signal], axis=1)
+                with JackPlayerProcess(stereo, served.in_ports, tmp_path):
                     time.sleep(0.5)
                     u0 = served.client.status()["underflows"]
                     time.sleep(WINDOW_S)
