@@ -15,10 +15,10 @@ export PYTHONDONTWRITEBYTECODE=1
 # The science, the engine and the settings by mypy's own --strict (imports of the layers above, reached
 # through the package's face, are read for their types; their findings belong to the line above).
 .venv/bin/mypy --strict --follow-imports=silent --cache-dir .mypy_cache/strict vibsynth/dsp vibsynth/engine vibsynth/settings
-# Fuzz the OSC parsers for 60 s in all (libFuzzer + ASan/UBSan on the fast path's datagram parser, atheris on the
+# Fuzz the OSC parsers for 30 s in all (libFuzzer + ASan/UBSan on the fast path's datagram parser, atheris on the
 # TCP framing; the regression corpus fuzz/corpus/ runs first): a crash fails the suite and names its
 # reproducer. Longer on demand: scripts/fuzz.sh --minutes N (docs/osc.md, Fuzzing).
-scripts/fuzz.sh --seconds 60
+scripts/fuzz.sh --seconds 30
 scripts/sanitize.sh  # the C extensions under ASan/UBSan: the C-facing and hostile-API tests (docs/engine.md)
 if [ $# -gt 0 ]; then
   exec scripts/with_jack.sh -- .venv/bin/python -m pytest -q -ra "$@"

@@ -1,6 +1,6 @@
 """fuzz/seeds.py: the fuzzers' seeds are valid OSC made from docs/osc.md, the dictionary is libFuzzer's format.
 
-(The fuzzers themselves run in scripts/test.sh: ``scripts/fuzz.sh --seconds 50``.)
+(The fuzzers themselves run in scripts/test.sh: ``scripts/fuzz.sh --seconds 30``.)
 """
 
 from __future__ import annotations
