@@ -11,7 +11,7 @@
 # whose thread a loaded VM scheduled late) makes the cycle late instead of leaving its previous
 # buffer in the graph. What a capture records is then exactly what the streams played, whatever
 # the scheduler did; lateness still shows as xruns (PortAudio's underflow count), which only the
-# benchmarks measure (docs/engine.md, "Real-time figures"). --async runs JACK's default mode.
+# benchmarks measure (docs/engine.md, "What the tests assert"). --async runs JACK's default mode.
 set -u
 mode=-S
 rate=48000; period=128; playback=16; capture=8
@@ -48,6 +48,6 @@ if ! jack_wait -w -t 10 >/dev/null 2>&1; then
     kill "$jack_pid" 2>/dev/null; exit 1
   fi
 fi
-export VIBSYNTH_JACK_RATE=$rate VIBSYNTH_JACK_PERIOD=$period VIBSYNTH_JACK_SYNC=${mode:+1}
+export VIBSYNTH_JACK_RATE=$rate VIBSYNTH_JACK_PERIOD=$period
 "$@"
 exit $?

@@ -257,7 +257,7 @@ REALTIME = pytest.mark.realtime
 #: of the JACK server as an underflow, the dummy driver's own late wake-ups included: on the
 #: shared 2-core VMs of this kind that noise reached 11 in 10 s (about 0.3 % of the 3,750
 #: callbacks) under a 10,000 messages/s flood, and 0-3 in 10 s quiet (docs/engine.md,
-#: "Real-time figures", benchmarks/bench_rt_share.py). A test asserts only what is ten times
+#: "Whose underflows?", benchmarks/bench_rt_share.py). A test asserts only what is ten times
 #: beyond that, a collapse (a callback that waits on a lock, an engine that stopped keeping up:
 #: such defects underflowed in most callbacks, >1000 in 10 s); the distributions themselves are
 #: the benchmarks' job.

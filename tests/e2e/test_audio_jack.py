@@ -155,7 +155,7 @@ def test_c_streams_10_seconds_without_collapse(jack_server, config):
     underflow, the dummy driver's own late wake-ups on this VM's timers included ("JackTimedDriver::
     Process XRun = 13 usec" in jackd's log), so that count is the machine's as much as ours: its
     distribution, beside the server alone and the peers, is benchmarks/bench_rt_share.py's
-    (docs/engine.md, "Real-time figures"). Here: the stream keeps running, the callbacks keep
+    (docs/engine.md, "Whose underflows?"). Here: the stream keeps running, the callbacks keep
     coming, and the underflows stay far below a collapse (:func:`assert_no_collapse`). No capture
     client: a second Python real-time callback in this process would share the GIL with ours,
     which is not the production set-up.
