@@ -29,7 +29,7 @@ from tests.e2e.oscclient import free_udp_port
 pytestmark = pytest.mark.e2e
 
 ROOT = Path(__file__).resolve().parents[2]
-WINDOW_S = float(os.environ.get("VIBSYNTH_RELOAD_WINDOW_S", "10"))
+WINDOW_S = float(os.environ.get("VIBSYNTH_RELOAD_WINDOW_S", "5"))
 JUNK_BYTES = 50 * 1024 * 1024
 START_TIMEOUT_S = 180.0
 
