@@ -66,6 +66,7 @@ if [ $# -eq 0 ] || [ ! -e "${1%%::*}" ]; then
   set -- "$@" tests/engine/test_core_hostile.py tests/engine/test_input_hostile.py \
     tests/control/osc/test_fast_hostile.py tests/engine/test_engine.py tests/engine/test_input_ring.py \
     tests/engine/test_layers_voices_tap.py tests/engine/test_trims.py tests/control/osc/test_fast.py \
+    tests/control/osc/test_fast_queue.py tests/control/osc/test_monitor_fast.py \
     --deselect tests/control/osc/test_fast.py::test_serve_starts_with_the_longest_prefix_on_the_most_channels
 fi
 status=0

@@ -10,6 +10,7 @@ import time
 
 import pytest
 
+from tests.control.osc.delivered import wait_delivered
 from tests.control.osc.fakes import make_controller
 from tests.e2e.oscclient import free_udp_port
 from tests.e2e.test_osc_e2e import OscDump, oscsend, require_tools
@@ -57,6 +58,7 @@ def _start_monitor(srv: OscServer, count: int) -> tuple[threading.Thread, dict]:
     deadline = time.monotonic() + 5
     while not len(srv.monitor) and time.monotonic() < deadline:
         time.sleep(0.01)
+    wait_delivered(srv)  # the subscription's handler has returned: the next knob messages go the fast way
     return thread, result
 
 

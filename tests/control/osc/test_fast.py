@@ -14,6 +14,7 @@ import time
 import numpy as np
 import pytest
 
+from tests.control.osc.delivered import wait_delivered
 from vibsynth.cli import main
 from vibsynth.control.controller import Controller
 from vibsynth.control.osc import _fast as _oscfast
@@ -49,7 +50,11 @@ def served(bank):
 
 
 def roundtrip(client, server, address, *args, types=None):
-    """Send, then ask /ping and wait for its answer: everything before it has been handled."""
+    """Send, then ask /ping and wait for its answer: everything before it has been handled.
+
+    And until the handler has returned: until then a new datagram queues behind the ping (order),
+    and would not take the fast path.
+    """
     if address is not None:
         client.sendto(encode_message(address, args, types), ("127.0.0.1", server.port))
     client.sendto(encode_message("/vibsynth/ping", (7,), "i"), ("127.0.0.1", server.port))
@@ -57,6 +62,7 @@ def roundtrip(client, server, address, *args, types=None):
     while True:
         msg = decode_packet(client.recvfrom(65536)[0])
         if msg.address.endswith("/pong"):
+            wait_delivered(server)
             return replies
         replies.append(msg)
 

@@ -103,11 +103,46 @@ def _core_args() -> dict[str, object]:
     )
 
 
-@pytest.mark.parametrize("call", ["run", "stop", "counters"])
+@pytest.mark.parametrize("call", ["run", "stop", "counters", "deliver"])
 def test_an_uninitialised_receiver_refuses_every_method(call):
     rx = _fast.Receiver.__new__(_fast.Receiver)
     with pytest.raises(RuntimeError, match="Receiver is not initialised"):
-        getattr(rx, call)()
+        getattr(rx, call)(*([0.0] if call == "deliver" else []))
+
+
+@pytest.mark.parametrize("timeout", [float("nan"), float("inf"), -0.5, 3601.0, 1e300])
+def test_deliver_refuses_a_timeout_outside_0_to_3600_s(udp, timeout):
+    with pytest.raises(ValueError, match="timeout must be 0..3600 s"):
+        receiver(udp.fileno()).deliver(timeout)
+
+
+def test_deliver_refuses_a_timeout_that_is_not_a_number(udp):
+    with pytest.raises(TypeError):
+        receiver(udp.fileno()).deliver("1")  # type: ignore[arg-type]
+
+
+def test_a_second_deliver_at_once_is_refused_and_deliver_ends_when_run_has(udp):
+    rx = receiver(udp.fileno())
+    results: list[object] = []
+    waiting = threading.Thread(target=lambda: results.append(rx.deliver(30.0)), daemon=True)
+    waiting.start()
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:  # until the first deliver() is inside
+        try:
+            rx.deliver(0.0)
+        except RuntimeError as exc:
+            assert "already running" in str(exc)
+            break
+        time.sleep(0.001)
+    else:
+        pytest.fail("a second deliver() at once was not refused")
+    running = threading.Thread(target=rx.run, daemon=True)
+    running.start()
+    rx.stop()  # run() returns and wakes deliver(): nothing is left, so it says False at once
+    running.join(5.0)
+    waiting.join(5.0)
+    assert results == [False]
+    assert rx.deliver(0.0) is False
 
 
 def test_a_second_init_is_refused(udp):

@@ -7,6 +7,7 @@ import time
 
 import pytest
 
+from tests.control.osc.delivered import wait_delivered
 from tests.control.osc.fakes import FakePeer, make_controller
 from vibsynth.control.osc.codec import Message, decode_packet, encode_message, iter_messages
 from vibsynth.control.osc.handler import OscHandler
@@ -110,6 +111,7 @@ def test_fast_path_messages_reach_the_monitor_as_sent_through_a_real_server():
         sock.sendto(encode_message("/vibsynth/monitor", (1,)), target)
         sock.settimeout(5.0)
         assert decode_packet(sock.recv(65536)).address == "/vibsynth/done"  # subscribed
+        wait_delivered(server)  # the handler has returned: nothing queues the next datagrams behind it
         # exact knob addresses, not behind a slow-path packet in their batch: the C fast path
         sock.sendto(encode_message("/vibsynth/intensity", (0.5,), "f"), target)  # moves both channels
         sock.sendto(encode_message("/vibsynth/ch/2/texture", (0.25, -1), "fi"), target)

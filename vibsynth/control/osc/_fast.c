@@ -10,23 +10,35 @@
  * methods, out-of-range or non-finite values, malformed packets) is handed, in arrival
  * order, to the Python handler, which validates, answers and counts it.
  *
- * Order: once a datagram of a receive batch goes to Python, every later datagram of that
- * batch does too, and before Python sees a batch the knob values set by the fast path are
- * recorded in the controller (on_state). So a `get` after a fast `intensity` answers the
- * new value, and the engine receives every command in arrival order.
+ * Python never holds up the socket. run() is the receive thread: once started it never takes the
+ * GIL, so a busy interpreter (a slow handler, a thread holding the GIL, a machine so loaded that
+ * normally scheduled threads wait for seconds) cannot stop it reading, and the fast path keeps
+ * feeding the engine meanwhile. What is for Python goes into a queue (QUEUE_MAX datagrams,
+ * QUEUE_ARENA bytes: seconds of a 10,000 messages/s flood), which deliver() hands over on a
+ * second thread: on_state first, then on_slow. A datagram that finds the queue full is dropped and
+ * counted (counters()["queue_full"]), never silently lost in the kernel's buffer.
+ *
+ * Order: while a datagram waits in the queue or Python is handling the queue's last hand-over,
+ * every new datagram joins the queue too, and before Python sees queued datagrams the knob values
+ * set by the fast path are recorded in the controller (on_state). So a `get` after a fast
+ * `intensity` answers the new value, and the engine receives every command in arrival order.
  *
  * Without an engine core (core=None) there is no fast path: this is then just the receive
- * loop (allow list, batching) in front of the Python handler.
+ * loop (allow list, queue) in front of the Python handler.
  *
  * The controller (queries, notify subscribers) learns of fast-path moves through
  * on_state(updates, last_seq, seen) with the last value per (knob, channel): before each
- * Python batch and at most every STATE_PERIOD_S otherwise.
+ * hand-over of the queue and at most every STATE_PERIOD_S otherwise.
  *
  * Monitors: while the byte of the `watch` buffer (the input tap's flag) is non-zero, each
  * datagram the fast path takes is also copied, as received, with its sender and arrival time,
  * into a log of MAX_SEEN entries handed to on_state as `seen` [(datagram, (host, port), unix
- * time), ...] in arrival order (a full log is handed over at once: nothing is dropped). So a
- * monitor shows what was sent (`/vibsynth/intensity f 0.3`), not the channels it moved.
+ * time), ...] in arrival order. While the log is full, datagrams go the queue's way (Python then
+ * describes them itself): nothing is dropped.
+ *
+ * Locks: qlock guards the queue, the fast-path state and the log, for a few hundred
+ * nanoseconds at a time, never while calling Python or waiting; wake is a binary semaphore
+ * (posted at most once per hand-over) on which deliver() waits with the GIL released.
  *
  * Hostile callers: `core` must be an initialised vibsynth.engine._core.Core (checked against the
  * type the core's capsule exports: TypeError otherwise) or None; a Receiver is initialised once
@@ -66,8 +78,9 @@ typedef int sock_t;
 #endif
 
 #define MAX_DATAGRAM 65536
-#define MAX_BATCH 256
-#define SLOW_ARENA (1 << 20)
+#define MAX_BATCH 256 /* datagrams read per poll() (then stop() is checked) */
+#define QUEUE_MAX 32768 /* datagrams waiting for Python: > 3 s of a 10,000/s flood */
+#define QUEUE_ARENA (4 << 20) /* their bytes */
 #define TABLE_SIZE 4096 /* open addressing; > 4 x the largest table (15 + 8 x 64 addresses) */
 #define MAX_ADDR 128
 #define MAX_NETS 64
@@ -87,12 +100,34 @@ typedef struct {
     int channel;  /* -1 = every channel */
 } entry_t;
 
+/* A sender, compactly (a queue holds QUEUE_MAX of them). */
+typedef struct {
+    uint8_t family; /* AF_INET or AF_INET6 */
+    uint8_t ip[16];
+    uint16_t port;
+} peer_t;
+
 typedef struct {
     double when;  /* wall clock (Unix seconds) of arrival */
     int len;
     uint8_t data[SEEN_DATAGRAM];
-    struct sockaddr_storage addr;
+    peer_t peer;
 } seen_t;
+
+typedef struct {
+    uint32_t off, len; /* in the queue's arena */
+    peer_t peer;
+} qitem_t;
+
+/* Datagrams for Python, in arrival order, and the monitors' log of fast-path datagrams. */
+typedef struct {
+    qitem_t *items;
+    uint8_t *arena;
+    size_t used;
+    int n;
+    seen_t *seen;
+    int n_seen;
+} queue_t;
 
 typedef struct {
     int family;   /* 4 or 6 */
@@ -112,28 +147,30 @@ typedef struct {
     PyObject *on_state;     /* on_state([(knob, channel, value), ...], last_seq, seen) */
     Py_buffer watch_view;   /* the tap's flag (view.obj NULL: no monitor support) */
     const volatile uint8_t *watch;
-    seen_t *seen;           /* fast-path datagrams received while watched, not yet handed over */
-    int n_seen;
     entry_t table[TABLE_SIZE];
     net_t nets[MAX_NETS];
     int n_nets;             /* -1 = allow everyone */
     volatile int stop;
     int running;
-    /* fast-path state not yet recorded in the controller */
-    double last_value[2][MAXCH];
+    volatile int finished;  /* run() has returned (deliver() hands over what is left, then says so) */
+    int delivering;         /* deliver() is running (on some thread) */
+    /* under qlock: what waits for Python */
+    PyThread_type_lock qlock, wake;
+    int wake_posted;        /* wake is released and deliver() has not taken it yet */
+    queue_t q[2];           /* q[fill] fills; deliver() hands over the other */
+    int fill;
+    int handing;            /* Python is handling queued datagrams: new ones queue behind them */
+    double last_value[2][MAXCH]; /* fast-path state not yet recorded in the controller */
     uint8_t dirty[2][MAXCH];
     int any_dirty;
     int64_t last_seq;
+    /* deliver()'s own */
+    double snap_value[2][MAXCH];
+    uint8_t snap_dirty[2][MAXCH];
     double last_flush;
     /* counters */
-    long long packets, bytes, fast, slow, denied, ring_full, handler_errors, recv_errors;
-    /* buffers */
+    long long packets, bytes, fast, slow, delivered, denied, ring_full, queue_full, handler_errors, recv_errors;
     uint8_t *scratch;
-    uint8_t *arena;
-    size_t arena_used;
-    int n_slow;
-    size_t slow_off[MAX_BATCH], slow_len[MAX_BATCH];
-    struct sockaddr_storage slow_addr[MAX_BATCH];
     int ready; /* __init__ succeeded: set once, last, and never cleared */
 } Receiver;
 
@@ -303,41 +340,99 @@ static int fast_handle(Receiver *r, const uint8_t *d, int n) {
     }
 }
 
-/* Keep a copy of a datagram the fast path took, for monitors (the caller hands a full log over). */
-static void log_seen(Receiver *r, const uint8_t *d, int n, const struct sockaddr_storage *addr) {
-    if (n > SEEN_DATAGRAM || r->n_seen >= MAX_SEEN) return; /* cannot happen: fast_handle bounds both */
-    seen_t *s = &r->seen[r->n_seen++];
+/* ------------------------------------------------------------------ the queue (qlock held) */
+static void peer_of(const struct sockaddr_storage *addr, peer_t *p) {
+    memset(p, 0, sizeof *p);
+    if (addr->ss_family == AF_INET6) {
+        const struct sockaddr_in6 *a = (const struct sockaddr_in6 *)addr;
+        p->family = AF_INET6;
+        memcpy(p->ip, &a->sin6_addr, 16);
+        p->port = ntohs(a->sin6_port);
+    } else {
+        const struct sockaddr_in *a = (const struct sockaddr_in *)addr;
+        p->family = AF_INET;
+        memcpy(p->ip, &a->sin_addr, 4);
+        p->port = ntohs(a->sin_port);
+    }
+}
+
+/* Keep a copy of a datagram the fast path took, for monitors. */
+static void log_seen(queue_t *q, const uint8_t *d, int n, const struct sockaddr_storage *addr) {
+    if (n > SEEN_DATAGRAM || q->n_seen >= MAX_SEEN) return; /* cannot happen: take() and fast_handle bound both */
+    seen_t *s = &q->seen[q->n_seen++];
     s->when = wall_s();
     s->len = n;
     memcpy(s->data, d, (size_t)n);
-    s->addr = *addr;
+    peer_of(addr, &s->peer);
+}
+
+/* One received, allowed datagram: into the engine (fast path) or into the queue for Python. */
+static void take(Receiver *r, const uint8_t *d, int n, const struct sockaddr_storage *addr) {
+    PyThread_acquire_lock(r->qlock, WAIT_LOCK);
+    queue_t *q = &r->q[r->fill];
+    int watched = r->watch && *r->watch;
+    int news; /* something deliver() did not know of: the first queued datagram, state or log entry */
+    if (!q->n && !r->handing && (!watched || q->n_seen < MAX_SEEN)) {
+        int was_dirty = r->any_dirty;
+        if (fast_handle(r, d, n)) {
+            r->fast++;
+            if (watched) log_seen(q, d, n, addr);
+            news = (!was_dirty && r->any_dirty) || (watched && q->n_seen == 1);
+            goto done;
+        }
+    }
+    if (q->n == QUEUE_MAX || q->used + (size_t)n > QUEUE_ARENA) {
+        r->queue_full++;
+        news = 0;
+    } else {
+        qitem_t *it = &q->items[q->n++];
+        it->off = (uint32_t)q->used;
+        it->len = (uint32_t)n;
+        peer_of(addr, &it->peer);
+        memcpy(q->arena + q->used, d, (size_t)n);
+        q->used += (size_t)n;
+        r->slow++;
+        news = q->n == 1;
+    }
+done:
+    if (news && !r->wake_posted) { /* once per hand-over: a flood does not wake deliver() per datagram */
+        r->wake_posted = 1;
+        PyThread_release_lock(r->wake);
+    }
+    PyThread_release_lock(r->qlock);
+}
+
+static void post_wake(Receiver *r) {
+    PyThread_acquire_lock(r->qlock, WAIT_LOCK);
+    if (!r->wake_posted) {
+        r->wake_posted = 1;
+        PyThread_release_lock(r->wake);
+    }
+    PyThread_release_lock(r->qlock);
 }
 
 /* ------------------------------------------------------------------ calls into Python (GIL held) */
-static PyObject *peer_tuple(const struct sockaddr_storage *addr);
-
-static PyObject *seen_list(Receiver *r) {
-    PyObject *list = PyList_New(r->n_seen);
-    for (int k = 0; list && k < r->n_seen; k++) {
-        const seen_t *s = &r->seen[k];
-        PyObject *t = Py_BuildValue("(y#Nd)", (const char *)s->data, (Py_ssize_t)s->len, peer_tuple(&s->addr), s->when);
-        if (!t) Py_CLEAR(list);
-        else PyList_SetItem(list, k, t);
-    }
-    r->n_seen = 0;
-    return list;
+static PyObject *peer_tuple(const peer_t *p) {
+    char host[INET6_ADDRSTRLEN];
+    inet_ntop(p->family, p->ip, host, sizeof host);
+    return Py_BuildValue("(si)", host, (int)p->port);
 }
 
-static void flush_state(Receiver *r) {
-    if (!r->any_dirty && !r->n_seen) return;
-    PyObject *seen = seen_list(r);
+/* on_state(updates, last_seq, seen) with deliver()'s snapshot and q's log. */
+static void hand_state(Receiver *r, const queue_t *q, int64_t seq) {
+    PyObject *seen = PyList_New(q->n_seen);
     PyObject *list = PyList_New(0);
     if (!list || !seen) goto fail;
+    for (int k = 0; k < q->n_seen; k++) {
+        const seen_t *s = &q->seen[k];
+        PyObject *t = Py_BuildValue("(y#Nd)", (const char *)s->data, (Py_ssize_t)s->len, peer_tuple(&s->peer), s->when);
+        if (!t) goto fail;
+        PyList_SetItem(seen, k, t);
+    }
     for (int knob = 0; knob < 2; knob++) {
         for (int c = 0; c < r->channels; c++) {
-            if (!r->dirty[knob][c]) continue;
-            r->dirty[knob][c] = 0;
-            PyObject *t = Py_BuildValue("(sid)", knob ? "balance" : "intensity", c, r->last_value[knob][c]);
+            if (!r->snap_dirty[knob][c]) continue;
+            PyObject *t = Py_BuildValue("(sid)", knob ? "balance" : "intensity", c, r->snap_value[knob][c]);
             if (!t || PyList_Append(list, t) < 0) {
                 Py_XDECREF(t);
                 goto fail;
@@ -345,67 +440,40 @@ static void flush_state(Receiver *r) {
             Py_DECREF(t);
         }
     }
-    r->any_dirty = 0;
-    PyObject *res = PyObject_CallFunction(r->on_state, "OLO", list, (long long)r->last_seq, seen);
+    PyObject *res = PyObject_CallFunction(r->on_state, "OLO", list, (long long)seq, seen);
     Py_DECREF(list);
     Py_DECREF(seen);
     if (!res) goto fail_noclean;
     Py_DECREF(res);
-    r->last_flush = now_s();
     return;
 fail:
     Py_XDECREF(list);
     Py_XDECREF(seen);
 fail_noclean:
-    r->last_flush = now_s(); /* retry in STATE_PERIOD_S, not at once */
     r->handler_errors++;
     PyErr_WriteUnraisable(r->on_state);
 }
 
-static PyObject *peer_tuple(const struct sockaddr_storage *addr) {
-    char host[INET6_ADDRSTRLEN];
-    int port;
-    if (addr->ss_family == AF_INET6) {
-        const struct sockaddr_in6 *a = (const struct sockaddr_in6 *)addr;
-        inet_ntop(AF_INET6, &a->sin6_addr, host, sizeof host);
-        port = ntohs(a->sin6_port);
-    } else {
-        const struct sockaddr_in *a = (const struct sockaddr_in *)addr;
-        inet_ntop(AF_INET, &a->sin_addr, host, sizeof host);
-        port = ntohs(a->sin_port);
-    }
-    return Py_BuildValue("(si)", host, port);
-}
-
-static void dispatch_slow(Receiver *r) {
-    if (!r->n_slow) return;
-    flush_state(r);
-    PyObject *list = PyList_New(r->n_slow);
+/* on_slow([(datagram, (host, port)), ...]) with q's datagrams, in arrival order. */
+static void hand_slow(Receiver *r, const queue_t *q) {
+    PyObject *list = PyList_New(q->n);
     if (!list) goto fail;
-    for (int k = 0; k < r->n_slow; k++) {
-        PyObject *t = Py_BuildValue("(y#N)", (const char *)r->arena + r->slow_off[k], (Py_ssize_t)r->slow_len[k],
-                                    peer_tuple(&r->slow_addr[k]));
+    for (int k = 0; k < q->n; k++) {
+        const qitem_t *it = &q->items[k];
+        PyObject *t = Py_BuildValue("(y#N)", (const char *)q->arena + it->off, (Py_ssize_t)it->len, peer_tuple(&it->peer));
         if (!t) {
             Py_DECREF(list);
             goto fail;
         }
         PyList_SetItem(list, k, t);
     }
-    r->slow += r->n_slow;
-    r->n_slow = 0;
-    r->arena_used = 0;
     PyObject *res = PyObject_CallFunctionObjArgs(r->on_slow, list, NULL);
     Py_DECREF(list);
-    if (!res) {
-        r->handler_errors++;
-        PyErr_WriteUnraisable(r->on_slow);
+    if (res) {
+        Py_DECREF(res);
         return;
     }
-    Py_DECREF(res);
-    return;
 fail:
-    r->n_slow = 0;
-    r->arena_used = 0;
     r->handler_errors++;
     PyErr_WriteUnraisable(r->on_slow);
 }
@@ -484,21 +552,17 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
         return NULL;
     }
     r->running = 1;
+    r->finished = 0;
     int err = 0;         /* the error that ends run() (0: stop()) */
     int consecutive = 0; /* receive errors since the last datagram */
-    PyThreadState *ts = PyEval_SaveThread();
+    PyThreadState *ts = PyEval_SaveThread(); /* and never taken again until run() returns */
     while (!r->stop) {
         if (consecutive) { /* a passing error: let it pass (1, 2, ... POLL_MS ms) before trying again */
             nap_ms(consecutive < POLL_MS ? consecutive : POLL_MS);
             if (r->stop) break;
         }
         struct pollfd pfd = {r->fd, POLLIN, 0};
-        int wait_ms = POLL_MS;
-        if (r->any_dirty || r->n_seen) { /* wake up in time to hand them over within STATE_PERIOD_S */
-            double left = STATE_PERIOD_S - (now_s() - r->last_flush);
-            wait_ms = left <= 0.0 ? 0 : (int)(left * 1000.0) + 1;
-        }
-        int ready = poll(&pfd, 1, wait_ms);
+        int ready = poll(&pfd, 1, POLL_MS);
         if (r->stop) break;
         if (ready < 0) {
             int e = sock_errno();
@@ -516,78 +580,42 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
 #endif
             break;
         }
-        int batch = 0, to_python = 0;
-        if (ready > 0) {
-            while (batch < MAX_BATCH) {
-                struct sockaddr_storage addr;
-                socklen_t alen = sizeof addr;
+        for (int batch = 0; ready > 0 && batch < MAX_BATCH;) {
+            struct sockaddr_storage addr;
+            socklen_t alen = sizeof addr;
 #ifdef _WIN32
-                int n = recvfrom(r->fd, (char *)r->scratch, MAX_DATAGRAM, 0, (struct sockaddr *)&addr, &alen);
+            int n = recvfrom(r->fd, (char *)r->scratch, MAX_DATAGRAM, 0, (struct sockaddr *)&addr, &alen);
 #else
-                ssize_t n = recvfrom(r->fd, r->scratch, MAX_DATAGRAM, MSG_DONTWAIT, (struct sockaddr *)&addr, &alen);
+            ssize_t n = recvfrom(r->fd, r->scratch, MAX_DATAGRAM, MSG_DONTWAIT, (struct sockaddr *)&addr, &alen);
 #endif
-                if (n < 0) {
-                    int e = sock_errno();
-                    int kind = recv_error_kind(e);
-                    if (kind == RX_WAIT) {
-                        consecutive = 0;
-                        break;
-                    }
-                    if (kind == RX_RETRY && ++consecutive < MAX_RECV_ERRORS) continue;
-                    if (kind != RX_RETRY) r->recv_errors++;
-                    if (kind == RX_TRANSIENT && ++consecutive < MAX_RECV_ERRORS) break;
-                    err = e;
+            if (n < 0) {
+                int e = sock_errno();
+                int kind = recv_error_kind(e);
+                if (kind == RX_WAIT) {
+                    consecutive = 0;
                     break;
                 }
-                consecutive = 0;
-                batch++;
-                r->packets++;
-                r->bytes += n;
-                if (!allowed(r, &addr)) {
-                    r->denied++;
-                    continue;
-                }
-                if (!to_python && fast_handle(r, r->scratch, (int)n)) {
-                    r->fast++;
-                    if (r->watch && *r->watch) {
-                        log_seen(r, r->scratch, (int)n, &addr);
-                        if (r->n_seen == MAX_SEEN) {
-                            PyEval_RestoreThread(ts);
-                            flush_state(r);
-                            ts = PyEval_SaveThread();
-                        }
-                    }
-                    continue;
-                }
-                to_python = 1; /* keep arrival order: the rest of this batch goes to Python too */
-                if (r->arena_used + (size_t)n > SLOW_ARENA || r->n_slow == MAX_BATCH) {
-                    PyEval_RestoreThread(ts);
-                    dispatch_slow(r);
-                    ts = PyEval_SaveThread();
-                }
-                memcpy(r->arena + r->arena_used, r->scratch, (size_t)n);
-                r->slow_off[r->n_slow] = r->arena_used;
-                r->slow_len[r->n_slow] = (size_t)n;
-                r->slow_addr[r->n_slow] = addr;
-                r->n_slow++;
-                r->arena_used += (size_t)n;
+                if (kind == RX_RETRY && ++consecutive < MAX_RECV_ERRORS) continue;
+                if (kind != RX_RETRY) r->recv_errors++;
+                if (kind == RX_TRANSIENT && ++consecutive < MAX_RECV_ERRORS) break;
+                err = e;
+                break;
             }
+            consecutive = 0;
+            batch++;
+            r->packets++;
+            r->bytes += n;
+            if (!allowed(r, &addr)) {
+                r->denied++;
+                continue;
+            }
+            take(r, r->scratch, (int)n, &addr);
         }
         if (err) break;
-        if (r->n_slow || ((r->any_dirty || r->n_seen) && now_s() - r->last_flush >= STATE_PERIOD_S)) {
-            PyEval_RestoreThread(ts);
-            if (r->n_slow)
-                dispatch_slow(r);
-            else
-                flush_state(r);
-            ts = PyEval_SaveThread();
-        }
     }
+    r->finished = 1;
+    post_wake(r); /* deliver() hands over what is left, then returns False */
     PyEval_RestoreThread(ts);
-    if (r->n_slow)
-        dispatch_slow(r); /* what came before the error, in order (flushes the state first) */
-    else
-        flush_state(r);
     r->running = 0;
     if (err && !r->stop) { /* after stop() (e.g. a socket closed meanwhile), an error is the end asked for */
         set_os_error(err);
@@ -596,9 +624,91 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
     Py_RETURN_NONE;
 }
 
+/* Snapshot, under qlock: swap the queues, copy the fast-path state. Returns the queue to hand over. */
+static queue_t *swap_queues(Receiver *r, int64_t *seq) {
+    queue_t *q = &r->q[r->fill];
+    r->fill = 1 - r->fill;
+    r->handing = q->n > 0;
+    memcpy(r->snap_value, r->last_value, sizeof r->snap_value);
+    memcpy(r->snap_dirty, r->dirty, sizeof r->snap_dirty);
+    memset(r->dirty, 0, sizeof r->dirty);
+    r->any_dirty = 0;
+    *seq = r->last_seq;
+    return q;
+}
+
+static PyObject *Receiver_deliver(Receiver *r, PyObject *arg) {
+    if (not_ready(r)) return NULL;
+    double timeout = PyFloat_AsDouble(arg);
+    if (timeout == -1.0 && PyErr_Occurred()) return NULL;
+    if (!(timeout >= 0.0 && timeout <= 3600.0)) {
+        PyErr_Format(PyExc_ValueError, "timeout must be 0..3600 s, got %R", arg);
+        return NULL;
+    }
+    if (r->delivering) {
+        PyErr_SetString(PyExc_RuntimeError, "deliver() is already running on another thread");
+        return NULL;
+    }
+    r->delivering = 1;
+    int more = 1, hand = 0;
+    int64_t seq = 0;
+    queue_t *q = NULL;
+    PyThreadState *ts = PyEval_SaveThread();
+    double end = now_s() + timeout;
+    for (;;) {
+        PyThread_acquire_lock(r->qlock, WAIT_LOCK);
+        const queue_t *f = &r->q[r->fill];
+        int items = f->n > 0, state = r->any_dirty || f->n_seen > 0;
+        int over = r->finished || r->stop;
+        double now = now_s(), wait = end - now;
+        if (state && !items) { /* the fast path's state: at most every STATE_PERIOD_S (and at the end) */
+            double due = r->last_flush + STATE_PERIOD_S - now;
+            if (over || due <= 0.0) items = 1;
+            else if (due < wait) wait = due;
+        }
+        if (items) {
+            q = swap_queues(r, &seq);
+            hand = 1;
+        }
+        PyThread_release_lock(r->qlock);
+        if (hand) break;
+        if (over && r->finished) { /* run() has returned and nothing is left */
+            more = 0;
+            break;
+        }
+        if (wait <= 0.0) break;
+        if (PyThread_acquire_lock_timed(r->wake, (long long)(wait * 1e6) + 1, 0) == PY_LOCK_ACQUIRED) {
+            PyThread_acquire_lock(r->qlock, WAIT_LOCK);
+            r->wake_posted = 0;
+            PyThread_release_lock(r->qlock);
+        }
+    }
+    PyEval_RestoreThread(ts);
+    if (hand) {
+        r->last_flush = now_s();
+        int any_state = q->n_seen > 0;
+        for (int k = 0; k < 2 * MAXCH && !any_state; k++) any_state = ((const uint8_t *)r->snap_dirty)[k];
+        if (any_state) hand_state(r, q, seq);
+        if (q->n) hand_slow(r, q);
+        /* At once, GIL held (qlock is only ever held for a few hundred ns, never while waiting): the
+         * fast path is held until now, and a client answered by on_slow may already be sending. */
+        PyThread_acquire_lock(r->qlock, WAIT_LOCK);
+        r->delivered += q->n;
+        q->n = 0;
+        q->used = 0;
+        q->n_seen = 0;
+        r->handing = 0;
+        PyThread_release_lock(r->qlock);
+    }
+    r->delivering = 0;
+    if (!more) Py_RETURN_FALSE;
+    Py_RETURN_TRUE;
+}
+
 static PyObject *Receiver_stop(Receiver *r, PyObject *unused) {
     if (not_ready(r)) return NULL;
     r->stop = 1;
+    post_wake(r); /* deliver() wakes up at once */
     Py_RETURN_NONE;
 }
 
@@ -637,7 +747,6 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
     }
     if (r->watch_view.obj) PyBuffer_Release(&r->watch_view);
     r->watch = NULL;
-    r->n_seen = 0;
     if (watch != Py_None) { /* watch: a buffer whose first byte says whether to log for monitors */
         if (PyObject_GetBuffer(watch, &r->watch_view, PyBUF_SIMPLE) < 0) return -1;
         if (r->watch_view.len < 1) {
@@ -729,11 +838,27 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
         if (PyErr_Occurred()) return -1;
     }
     if (!r->scratch) r->scratch = malloc(MAX_DATAGRAM);
-    if (!r->arena) r->arena = malloc(SLOW_ARENA);
-    if (!r->seen) r->seen = malloc(MAX_SEEN * sizeof(seen_t));
-    if (!r->scratch || !r->arena || !r->seen) {
+    for (int k = 0; k < 2; k++) { /* the queues' pages are touched only when Python falls behind */
+        queue_t *q = &r->q[k];
+        if (!q->items) q->items = malloc(QUEUE_MAX * sizeof(qitem_t));
+        if (!q->arena) q->arena = malloc(QUEUE_ARENA);
+        if (!q->seen) q->seen = malloc(MAX_SEEN * sizeof(seen_t));
+        if (!q->items || !q->arena || !q->seen) break;
+    }
+    if (!r->qlock) r->qlock = PyThread_allocate_lock();
+    if (!r->wake) { /* a binary semaphore: taken (nothing to hand over) until run() posts it */
+        r->wake = PyThread_allocate_lock();
+        if (r->wake) PyThread_acquire_lock(r->wake, WAIT_LOCK);
+    }
+    if (!r->scratch || !r->qlock || !r->wake) {
         PyErr_NoMemory();
         return -1;
+    }
+    for (int k = 0; k < 2; k++) {
+        if (!r->q[k].items || !r->q[k].arena || !r->q[k].seen) {
+            PyErr_NoMemory();
+            return -1;
+        }
     }
     r->ready = 1;
     return 0;
@@ -746,26 +871,39 @@ static void Receiver_dealloc(Receiver *r) {
     Py_XDECREF(r->on_state);
     if (r->watch_view.obj) PyBuffer_Release(&r->watch_view);
     free(r->scratch);
-    free(r->arena);
-    free(r->seen);
+    for (int k = 0; k < 2; k++) {
+        free(r->q[k].items);
+        free(r->q[k].arena);
+        free(r->q[k].seen);
+    }
+    if (r->qlock) PyThread_free_lock(r->qlock);
+    if (r->wake) {
+        if (!r->wake_posted) PyThread_release_lock(r->wake); /* freeing a held lock is not allowed everywhere */
+        PyThread_free_lock(r->wake);
+    }
     ((freefunc)PyType_GetSlot(type, Py_tp_free))(r);
     Py_DECREF(type); /* a heap type: each instance holds a reference to it */
 }
 
 static PyObject *Receiver_counters(Receiver *r, PyObject *unused) {
     if (not_ready(r)) return NULL;
-    return Py_BuildValue("{sLsLsLsLsLsLsLsL}", "packets", r->packets, "bytes", r->bytes, "fast", r->fast, "slow",
-                         r->slow, "denied", r->denied, "ring_full", r->ring_full, "handler_errors",
-                         r->handler_errors, "recv_errors", r->recv_errors);
+    return Py_BuildValue("{sLsLsLsLsLsLsLsLsLsL}", "packets", r->packets, "bytes", r->bytes, "fast", r->fast, "slow",
+                         r->slow, "delivered", r->delivered, "denied", r->denied, "ring_full", r->ring_full, "queue_full", r->queue_full,
+                         "handler_errors", r->handler_errors, "recv_errors", r->recv_errors);
 }
 
 static PyMethodDef Receiver_methods[] = {
     {"run", (PyCFunction)Receiver_run, METH_NOARGS,
      "receive until stop() (returns None), or until the socket fails (raises OSError); call from the receive "
-     "thread"},
+     "thread (it never takes the GIL meanwhile)"},
+    {"deliver", (PyCFunction)Receiver_deliver, METH_O,
+     "deliver(timeout_s): wait up to timeout_s (0..3600) for what run() queued for Python and hand it over "
+     "(on_state, then on_slow); False once run() has returned and nothing is left, else True; call in a loop "
+     "from a second thread"},
     {"stop", (PyCFunction)Receiver_stop, METH_NOARGS, "ask run() to return (within 100 ms)"},
     {"counters", (PyCFunction)Receiver_counters, METH_NOARGS,
-     "packets, bytes, fast, slow, denied, ring_full, handler_errors, recv_errors"},
+     "packets, bytes, fast, slow (queued for Python), delivered (handed to Python, which has returned), denied, ring_full, queue_full (dropped: Python was "
+     "QUEUE_MAX datagrams behind), handler_errors, recv_errors"},
     {NULL}};
 
 /* A heap type (the limited API has no static PyTypeObject), immutable like a static one. */
@@ -794,5 +932,6 @@ PyMODINIT_FUNC PyInit__fast(void) {
     PyModule_AddIntConstant(m, "M_BALANCE", M_BALANCE);
     PyModule_AddIntConstant(m, "M_TEXTURE", M_TEXTURE);
     PyModule_AddIntConstant(m, "MAX_BATCH", MAX_BATCH);
+    PyModule_AddIntConstant(m, "QUEUE_MAX", QUEUE_MAX);
     return m;
 }

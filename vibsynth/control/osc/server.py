@@ -134,6 +134,7 @@ class OscServer:
             ("tcp_refused", s.tcp_refused),
             ("tcp_idle_closed", s.tcp_idle_closed),
             ("receive_failed", s.receive_failed),
+            ("queue_full", self.udp.counters().get("queue_full", 0)),
         ]
 
     def counters(self) -> dict[str, int]:

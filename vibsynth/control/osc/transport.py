@@ -1,18 +1,19 @@
-"""OSC transports: UDP (one receive thread, large receive buffer) and optional TCP with SLIP framing.
+"""OSC transports: UDP (a compiled receive loop, large receive buffer) and optional TCP with SLIP framing.
 
 Transports know nothing of OSC addresses: they receive packets, drop those from
 clients outside the allow-list (counted), and hand batches of ``(data, peer)`` to a
-callback on their single receive thread: after waiting for the first packet, the UDP
-thread drains whatever else is already queued in the socket (up to 256 datagrams),
-so the handler can coalesce moves that arrived together. The UDP receive loop is
-compiled (:mod:`vibsynth.control.osc._fast`): it runs without the GIL and, when the
+callback, so the handler can coalesce moves that arrived together. The UDP receive loop is
+compiled (:mod:`vibsynth.control.osc._fast`): it never waits for the GIL and, when the
 OSC server gives it a fast path (:mod:`vibsynth.control.osc.fast`), puts the common knob
-messages straight into the engine's command ring. That loop runs under real-time scheduling
+messages straight into the engine's command ring. What is for Python it queues (seconds of a
+flood; a datagram finding the queue full is counted in ``queue_full``), and a second, normally
+scheduled thread hands the queue to the callback in arrival order, so a busy interpreter or a
+slow handler never stops the socket being read. The loop runs under real-time scheduling
 (SCHED_FIFO at :data:`RECEIVE_PRIORITY`, below the audio threads) where the system allows it,
 so a datagram wakes it at once even when every core is busy, and before the next block
-starts; the thread drops to normal scheduling while Python handles a batch, so a flood of
-messages for Python competes for the processor like any other work. ``peer.send(data)`` replies to the sender (UDP:
-its address, or the configured reply port on its host; TCP: the same connection).
+starts. The TCP transport runs its callback on its own selector thread.
+``peer.send(data)`` replies to the sender (UDP: its address, or the configured reply port on
+its host; TCP: the same connection).
 
 Limits: TCP connections are bounded (:data:`TCP_MAX_CONNECTIONS` in all,
 :data:`TCP_MAX_PER_PEER` per client address) and closed after :data:`TCP_IDLE_TIMEOUT_S`
@@ -85,22 +86,12 @@ def _realtime(priority: int) -> bool:
     return True
 
 
-def _normal() -> bool:
-    """Put the calling thread back under normal scheduling (SCHED_OTHER); False where not POSIX."""
-    if not hasattr(os, "sched_setscheduler"):  # Windows, macOS: the thread never left it
-        return False
-    try:
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-    except OSError:
-        return False
-    return True
-
-
 BatchHandler = Callable[[list], None]
-"""``handler([(data, peer), ...])``, called on the receive thread."""
+"""``handler([(data, peer), ...])``, called on the receive thread (UDP: on its delivery thread)."""
 
 ReceiverFactory = Callable[[int, Callable[[list], None], Any], Any]
-"""``factory(fd, on_datagrams, allow) -> receiver`` with ``run()``, ``stop()``, ``counters()``."""
+"""``factory(fd, on_datagrams, allow) -> receiver`` with ``run()``, ``deliver(timeout_s)``, ``stop()``,
+``counters()``."""
 
 
 @dataclass
@@ -318,14 +309,19 @@ class FramingDetector:
 
 # ---------------------------------------------------------------------- UDP
 class UdpTransport:
-    """UDP server socket with one receive thread.
+    """UDP server socket with a receive thread and a delivery thread.
+
+    The receive thread runs the compiled loop (:mod:`vibsynth.control.osc._fast`), which never
+    waits for the GIL: a busy interpreter cannot make the kernel drop datagrams. What the loop
+    queues for Python reaches ``on_batch`` on the delivery thread (normally scheduled), in
+    arrival order.
 
     Parameters
     ----------
     host, port : str, int
         Bind address (port 0 picks a free port; see :attr:`port` after :meth:`open`).
     on_batch : callable
-        ``on_batch([(data, peer), ...])``, called on the receive thread.
+        ``on_batch([(data, peer), ...])``, called on the delivery thread.
     allow : AllowList or None
         Client addresses accepted (None = all); see :func:`parse_allow_list`.
     reply_port : int or None
@@ -370,6 +366,7 @@ class UdpTransport:
         self._receiver: Any = None
         self.sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
+        self._delivery: threading.Thread | None = None
         self._stop = threading.Event()
 
     def open(self) -> None:
@@ -396,7 +393,7 @@ class UdpTransport:
         self.sock = sock
 
     def start(self) -> None:
-        """Open (if needed) and start the receive thread."""
+        """Open (if needed) and start the receive and delivery threads."""
         if self.sock is None:
             self.open()
         self._stop.clear()
@@ -404,17 +401,20 @@ class UdpTransport:
         self._receiver = self.receiver_factory(self.sock.fileno(), self._on_datagrams, self.allow)
         self._scheduled.clear()
         self._thread = threading.Thread(target=self._run, name="vibsynth-osc-udp", daemon=True)
+        self._delivery = threading.Thread(target=self._deliver, name="vibsynth-osc-deliver", daemon=True)
         self._thread.start()
+        self._delivery.start()
         self._scheduled.wait(2.0)  # so that :attr:`realtime` is known when start() returns
 
     def stop(self) -> None:
-        """Stop the receive thread (within 0.1 s) and close the socket."""
+        """Stop the receive thread (within 0.1 s), hand over what it queued, close the socket."""
         self._stop.set()
         if self._receiver is not None:
             self._receiver.stop()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        for thread in (self._thread, self._delivery):
+            if thread is not None:
+                thread.join(timeout=2.0)
+        self._thread = self._delivery = None
         if self.sock is not None:
             self.sock.close()
             self.sock = None
@@ -445,28 +445,29 @@ class UdpTransport:
                 self.stats.receive_failed += 1
                 log.error("OSC: the UDP receive loop on port %s stopped: %s", self.port, exc)
 
+    def _deliver(self) -> None:
+        """What the receive loop queued for Python, to :attr:`on_batch`, until the loop has ended."""
+        receiver = self._receiver
+        if receiver is not None:
+            while receiver.deliver(_POLL_S):
+                pass
+
     def counters(self) -> dict[str, int]:
         """The receive loop's counters: packets, bytes, fast (handled in C), slow, denied, ..."""
         receiver = self._receiver
         return receiver.counters() if receiver is not None else {}
 
     def _on_datagrams(self, items: list[tuple[bytes, tuple[str, int]]]) -> None:
-        """Datagrams the compiled loop hands to Python (in arrival order), on the receive thread,
-        which runs normally scheduled meanwhile (the real-time priority is for the compiled loop)."""
-        demoted = self.realtime and _normal()
+        """Datagrams the compiled loop hands to Python (in arrival order), on the delivery thread."""
+        batch = []
+        for data, address in items:
+            reply_to = address if self.reply_port is None else (address[0], self.reply_port)
+            batch.append((data, UdpPeer(address, reply_to, self)))
         try:
-            batch = []
-            for data, address in items:
-                reply_to = address if self.reply_port is None else (address[0], self.reply_port)
-                batch.append((data, UdpPeer(address, reply_to, self)))
-            try:
-                self.on_batch(batch)
-            except Exception:  # the receive thread must survive anything
-                self.stats.handler_errors += 1
-                log.exception("OSC: handler failed on a batch of %d packet(s)", len(batch))
-        finally:
-            if demoted:
-                _realtime(self.priority)
+            self.on_batch(batch)
+        except Exception:  # the delivery thread must survive anything
+            self.stats.handler_errors += 1
+            log.exception("OSC: handler failed on a batch of %d packet(s)", len(batch))
 
 
 # ---------------------------------------------------------------------- TCP
