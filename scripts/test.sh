@@ -28,9 +28,9 @@ fi
 # the end-to-end files that measure no time (PARALLEL_SAFE: browser and client pages on the null
 # output); then the other end-to-end tests (marked serial by tests/e2e/conftest.py) one at a time:
 # they measure real-time behaviour against a quiet baseline, so nothing else may load the machine.
-# Both run to the end; either failing fails.
+# Both run to the end; either failing fails. Each lists its 15 slowest tests (the suite must stay under 20 min).
 exec scripts/with_jack.sh -- bash -c '
   status=0
-  .venv/bin/python -m pytest -q -ra -n 2 --dist loadfile -m "not serial" tests || status=$?
-  .venv/bin/python -m pytest -q -ra -m serial tests/e2e || status=$?
+  .venv/bin/python -m pytest -q -ra --durations=15 -n 2 --dist loadfile -m "not serial" tests || status=$?
+  .venv/bin/python -m pytest -q -ra --durations=15 -m serial tests/e2e || status=$?
   exit $status'
