@@ -41,6 +41,8 @@ import numpy as np
 import pytest
 import tomllib
 
+from tests.serveutil import stop_serve
+
 ROOT = Path(__file__).resolve().parents[1]
 EXTENSIONS = ("vibsynth/engine/_core", "vibsynth/engine/_input", "vibsynth/control/osc/_fast")
 SOURCES_ONLY = (".c", ".h")  # in the sdist, not in the wheel
@@ -300,15 +302,6 @@ def _wait_for_lines(proc: subprocess.Popen, log: Path, *patterns: str, timeout: 
         time.sleep(0.05)
 
 
-def _stop(proc: subprocess.Popen) -> None:
-    proc.terminate()
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-
-
 def _get(url: str, token: str | None = None) -> bytes:
     headers = {"Authorization": f"Bearer {token}"} if token else {}
     with urllib.request.urlopen(urllib.request.Request(url, headers=headers), timeout=10) as response:
@@ -358,7 +351,7 @@ def test_serve_answers_osc_serves_the_studio_and_the_oscquery_tree(installed):
         host_info = json.loads(_get(oscquery.rstrip("/") + "/?HOST_INFO"))
         assert host_info["OSC_PORT"] == int(osc_port)
     finally:
-        _stop(proc)
+        stop_serve(proc)
     assert proc.returncode == 0 and "Traceback" not in log.read_text()
 
 
@@ -374,7 +367,7 @@ def _serve_briefly(installed: Installed, *args: str, extra_env: dict[str, str]) 
         proc.wait(timeout=90)
     finally:
         if proc.poll() is None:
-            _stop(proc)
+            stop_serve(proc)
     text = log.read_text()
     assert proc.returncode == 0, text
     assert "Traceback" not in text

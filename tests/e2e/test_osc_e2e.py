@@ -27,6 +27,7 @@ import pytest
 from tests.e2e.jackutil import REALTIME, assert_no_collapse  # noqa: E402
 from tests.e2e.oscclient import OscClient as Client  # noqa: E402
 from tests.e2e.oscclient import free_udp_port
+from tests.serveutil import stop_serve
 from vibsynth.control.osc.codec import decode_packet, encode_bundle, encode_message, unix_to_ntp
 
 pytestmark = pytest.mark.e2e
@@ -125,16 +126,6 @@ def wait_for_stream(status) -> None:
     while int(status()["frame"]) <= 0:
         assert time.monotonic() < deadline, "serve's audio stream did not start"
         time.sleep(0.05)
-
-
-def stop_serve(proc: subprocess.Popen) -> None:
-    """Stop a ``vibsynth serve`` started by a test: SIGTERM, then SIGKILL if it hangs."""
-    proc.terminate()
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 class OscDump:

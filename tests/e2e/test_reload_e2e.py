@@ -25,6 +25,7 @@ import pytest
 from tests.e2e.jackutil import REALTIME, assert_no_collapse, e2e_required, jack_server_available
 from tests.e2e.oscclient import OscClient as Osc
 from tests.e2e.oscclient import free_udp_port
+from tests.serveutil import stop_serve
 
 pytestmark = pytest.mark.e2e
 
@@ -71,7 +72,7 @@ def _start(tmp_path: Path, presets: Path) -> tuple[subprocess.Popen, int, Path]:
             if proc.poll() is not None:
                 raise AssertionError(f"serve exited ({proc.returncode}):\n{log_path.read_text()}")
             if time.monotonic() > deadline:
-                _stop(proc)
+                stop_serve(proc)
                 raise AssertionError("serve did not answer /ping in time:\n" + log_path.read_text())
             try:
                 probe.request("/vibsynth/ping", 1, expect="/vibsynth/pong", timeout=0.5)
@@ -80,15 +81,6 @@ def _start(tmp_path: Path, presets: Path) -> tuple[subprocess.Popen, int, Path]:
                 continue
     finally:
         probe.close()
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    proc.terminate()
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 def _underflows_over(client: Osc, seconds: float) -> int:
@@ -142,7 +134,7 @@ def test_a_50mb_file_in_the_preset_folder_is_skipped_once_and_reload_goes_on(tmp
             time.sleep(0.2)
     finally:
         client.close()
-        _stop(proc)
+        stop_serve(proc)
     log = log_path.read_text()
     print(f"\nunderflows per {WINDOW_S:g} s: baseline {baseline}, with a 50 MB file in the preset folder {loaded}")
     skipped = [line for line in log.splitlines() if "junk.yaml" in line]
