@@ -184,3 +184,29 @@ def test_fast_moves_wait_behind_a_datagram_for_python(make_loop):
     loop.stop()
     assert loop.slow == [SLOW, second]
     assert loop.states == [0]  # the fast move was recorded before Python saw what came after it
+
+
+def test_what_run_queued_until_it_returned_is_all_handed_over_during_a_flood(make_loop):
+    """stop() in the middle of a flood for Python: deliver() says False only after the last of it."""
+    loop = make_loop()
+    loop.thread.start()
+    loop.start_delivery()
+    sending = threading.Event()
+    sending.set()
+    target = loop.sock.getsockname()
+
+    def flood() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+            while sending.is_set():
+                sender.sendto(SLOW, target)
+
+    thread = threading.Thread(target=flood, daemon=True)
+    thread.start()
+    loop.wait_packets(2000)
+    loop.stop()
+    sending.clear()
+    thread.join(5.0)
+    counters = loop.rx.counters()
+    assert counters["slow"] >= 2000 and counters["queue_full"] == 0
+    assert counters["delivered"] == counters["slow"] == len(loop.slow)
+    assert not loop.thread.is_alive() and loop.delivery is not None and not loop.delivery.is_alive()

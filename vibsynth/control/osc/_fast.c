@@ -152,7 +152,7 @@ typedef struct {
     int n_nets;             /* -1 = allow everyone */
     volatile int stop;
     int running;
-    volatile int finished;  /* run() has returned (deliver() hands over what is left, then says so) */
+    int finished;           /* (qlock) run() has returned: deliver() hands over what is left, then says so */
     int delivering;         /* deliver() is running (on some thread) */
     /* under qlock: what waits for Python */
     PyThread_type_lock qlock, wake;
@@ -552,7 +552,9 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
         return NULL;
     }
     r->running = 1;
+    PyThread_acquire_lock(r->qlock, WAIT_LOCK); /* held for nanoseconds: the GIL may stay held */
     r->finished = 0;
+    PyThread_release_lock(r->qlock);
     int err = 0;         /* the error that ends run() (0: stop()) */
     int consecutive = 0; /* receive errors since the last datagram */
     PyThreadState *ts = PyEval_SaveThread(); /* and never taken again until run() returns */
@@ -613,8 +615,14 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
         }
         if (err) break;
     }
+    /* Under qlock, after the last take(): deliver() reading it under qlock has seen every datagram. */
+    PyThread_acquire_lock(r->qlock, WAIT_LOCK);
     r->finished = 1;
-    post_wake(r); /* deliver() hands over what is left, then returns False */
+    if (!r->wake_posted) { /* deliver() hands over what is left, then returns False */
+        r->wake_posted = 1;
+        PyThread_release_lock(r->wake);
+    }
+    PyThread_release_lock(r->qlock);
     PyEval_RestoreThread(ts);
     r->running = 0;
     if (err && !r->stop) { /* after stop() (e.g. a socket closed meanwhile), an error is the end asked for */
@@ -659,7 +667,7 @@ static PyObject *Receiver_deliver(Receiver *r, PyObject *arg) {
         PyThread_acquire_lock(r->qlock, WAIT_LOCK);
         const queue_t *f = &r->q[r->fill];
         int items = f->n > 0, state = r->any_dirty || f->n_seen > 0;
-        int over = r->finished || r->stop;
+        int finished = r->finished, over = finished || r->stop;
         double now = now_s(), wait = end - now;
         if (state && !items) { /* the fast path's state: at most every STATE_PERIOD_S (and at the end) */
             double due = r->last_flush + STATE_PERIOD_S - now;
@@ -672,7 +680,7 @@ static PyObject *Receiver_deliver(Receiver *r, PyObject *arg) {
         }
         PyThread_release_lock(r->qlock);
         if (hand) break;
-        if (over && r->finished) { /* run() has returned and nothing is left */
+        if (finished) { /* run() has returned (read under qlock: after its last datagram) and nothing is left */
             more = 0;
             break;
         }
