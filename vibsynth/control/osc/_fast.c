@@ -367,6 +367,14 @@ static void log_seen(queue_t *q, const uint8_t *d, int n, const struct sockaddr_
 }
 
 /* One received, allowed datagram: into the engine (fast path) or into the queue for Python. */
+/* Wake deliver() (qlock held): at most once per hand-over, so a flood does not wake it per datagram. */
+static void post_locked(Receiver *r) {
+    if (!r->wake_posted) {
+        r->wake_posted = 1;
+        PyThread_release_lock(r->wake);
+    }
+}
+
 static void take(Receiver *r, const uint8_t *d, int n, const struct sockaddr_storage *addr) {
     PyThread_acquire_lock(r->qlock, WAIT_LOCK);
     queue_t *q = &r->q[r->fill];
@@ -395,19 +403,13 @@ static void take(Receiver *r, const uint8_t *d, int n, const struct sockaddr_sto
         news = q->n == 1;
     }
 done:
-    if (news && !r->wake_posted) { /* once per hand-over: a flood does not wake deliver() per datagram */
-        r->wake_posted = 1;
-        PyThread_release_lock(r->wake);
-    }
+    if (news) post_locked(r);
     PyThread_release_lock(r->qlock);
 }
 
 static void post_wake(Receiver *r) {
     PyThread_acquire_lock(r->qlock, WAIT_LOCK);
-    if (!r->wake_posted) {
-        r->wake_posted = 1;
-        PyThread_release_lock(r->wake);
-    }
+    post_locked(r);
     PyThread_release_lock(r->qlock);
 }
 
@@ -618,10 +620,7 @@ static PyObject *Receiver_run(Receiver *r, PyObject *unused) {
     /* Under qlock, after the last take(): deliver() reading it under qlock has seen every datagram. */
     PyThread_acquire_lock(r->qlock, WAIT_LOCK);
     r->finished = 1;
-    if (!r->wake_posted) { /* deliver() hands over what is left, then returns False */
-        r->wake_posted = 1;
-        PyThread_release_lock(r->wake);
-    }
+    post_locked(r); /* deliver() hands over what is left, then returns False */
     PyThread_release_lock(r->qlock);
     PyEval_RestoreThread(ts);
     r->running = 0;
