@@ -81,15 +81,36 @@ class _Parser(argparse.ArgumentParser):
             (file or sys.stdout).write(message)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser with every discovered sub-command."""
+def build_parser(modules: Sequence | None = None) -> argparse.ArgumentParser:
+    """The argument parser with every discovered sub-command (or only those of ``modules``)."""
     parser = _Parser(prog="vibsynth", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"vibsynth {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module in _subcommand_modules():
+    for module in _subcommand_modules() if modules is None else modules:
         module.register(subparsers)
     return parser
+
+
+def _parser_for(argv: Sequence[str]) -> argparse.ArgumentParser:
+    """A parser for ``argv``: when its command lives in the module of the same name, that module's only.
+
+    Importing every command's module (numpy, scipy, pydantic, aiohttp...) is most of a start; ``vibsynth
+    send`` in a script loop should not pay for ``serve``. Anything else (top-level ``--help``, a typo, a
+    command whose module is named otherwise) gets the full parser, so its help and errors are unchanged.
+    """
+    command = next((a for a in argv if not a.startswith("-")), None)
+    if command and command.isidentifier() and not command.startswith("_"):
+        try:
+            module = importlib.import_module(f"{__name__}.{command}")
+        except ImportError:
+            module = None
+        if module is not None and hasattr(module, "register"):
+            parser = build_parser([module])
+            choices = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+            if command in choices:
+                return parser
+    return build_parser()
 
 
 class _LineFormatter(logging.Formatter):
@@ -167,7 +188,7 @@ def _run(argv: Sequence[str] | None) -> int:
         # answered before the sub-commands are imported (numpy, scipy, aiohttp...: most of a start)
         print(f"vibsynth {__version__}")
         return 0
-    parser = build_parser()
+    parser = _parser_for(list(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     level = logging.WARNING if args.verbose == 0 else logging.INFO if args.verbose == 1 else logging.DEBUG
     handler = logging.StreamHandler()

@@ -15,7 +15,7 @@ import time
 from typing import Any
 
 from vibsynth.app.client import Client, encode_bundle, encode_message
-from vibsynth.cli._common import integer_in, number_in
+from vibsynth.cli._numbers import integer_in, number_in
 from vibsynth.cli._server import add_server_arguments, server_address
 from vibsynth.control.clips.timeline import GAIN_MAX, LOOPS_MAX, RATE_MAX, RATE_MIN
 from vibsynth.errors import NoReplyError, ParameterError

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import math
 import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from vibsynth.cli._numbers import finite_float, integer_in, number_in, positive_seconds, unit_interval
 from vibsynth.dsp.basis import Basis
 from vibsynth.dsp.filterbank import MIN_RATE_HZ
 from vibsynth.formats.basis_file import default_basis, load_basis
@@ -30,57 +30,8 @@ __all__ = [
 ]
 
 MAX_RATE_HZ = 768_000.0
-MAX_SECONDS = 3600.0
 
 
-def finite_float(text: str) -> float:
-    """A finite number (NaN and infinities are refused)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
-
-
-def integer_in(low: int, high: int | None = None, *, what: str = "") -> Callable[[str], int]:
-    """An argparse type: an integer within [low, high] (``high=None``: no upper bound)."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if value < low or (high is not None and value > high):
-            span = f"{low}..{high}" if high is not None else f">= {low}"
-            raise argparse.ArgumentTypeError(f"{what + ' ' if what else ''}{value} is outside {span}")
-        return value
-
-    return parse
-
-
-def number_in(low: float, high: float, *, unit: str = "", low_open: bool = False) -> Callable[[str], float]:
-    """An argparse type: a finite number within [low, high] (``low_open``: (low, high])."""
-
-    def parse(text: str) -> float:
-        value = finite_float(text)
-        if (value <= low if low_open else value < low) or value > high:
-            suffix = f" {unit}" if unit else ""
-            raise argparse.ArgumentTypeError(
-                f"{value:g}{suffix} is outside {'(' if low_open else '['}{low:g}, {high:g}]{suffix}"
-            )
-        return value
-
-    return parse
-
-
-unit_interval = number_in(0.0, 1.0)
-unit_interval.__doc__ = "A number in [0, 1] (the intensity knob)."
-
-
-#: A duration in seconds, > 0 and at most an hour (renders).
-positive_seconds = number_in(0.0, MAX_SECONDS, unit="s", low_open=True)
 #: A sample rate in Hz within [2400, 768000] (the bank reaches 1000 Hz).
 sample_rate = number_in(MIN_RATE_HZ, MAX_RATE_HZ, unit="Hz")
 

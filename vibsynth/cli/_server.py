@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from vibsynth.cli._common import integer_in, positive_seconds
+from vibsynth.cli._numbers import integer_in, positive_seconds
 from vibsynth.errors import ParameterError
 
 __all__ = ["add_server_arguments", "server_address"]

@@ -6,7 +6,7 @@ import argparse
 import logging
 import sys
 
-from vibsynth.cli._common import integer_in, number_in
+from vibsynth.cli._numbers import integer_in, number_in
 
 ORDER = 14
 

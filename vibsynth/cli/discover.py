@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from vibsynth.cli._common import number_in
+from vibsynth.cli._numbers import number_in
 from vibsynth.cli._table import Column, add_format_argument, emit, output_format
 
 ORDER = 8

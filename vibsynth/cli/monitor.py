@@ -9,7 +9,7 @@ import sys
 import time
 from typing import Any
 
-from vibsynth.cli._common import integer_in, positive_seconds
+from vibsynth.cli._numbers import integer_in, positive_seconds
 from vibsynth.cli._server import add_server_arguments, server_address
 
 ORDER = 8
