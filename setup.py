@@ -60,7 +60,7 @@ setup(
         extension(
             "vibsynth.control.osc._fast",
             ["vibsynth/control/osc/_fast.c"],
-            depends=["vibsynth/engine/_core_api.h"],
+            depends=["vibsynth/engine/_core_api.h", "vibsynth/engine/_rt.h"],
             libraries=["ws2_32"] if sys.platform == "win32" else [],
         ),
     ],

@@ -456,7 +456,42 @@ def proc_numbers(pid: int) -> dict[str, float]:
         "fds": len(os.listdir(f"/proc/{pid}/fd")),
         "threads": len(os.listdir(f"/proc/{pid}/task")),
         "cpu_s": proc_cpu_seconds(pid) or 0.0,
+        **proc_memory(pid),
     }
+
+
+MEMORY_KINDS = ("heap", "anon", "stack", "files")
+
+
+def proc_memory(pid: int) -> dict[str, float]:
+    """Resident MB by kind of mapping (``/proc/PID/smaps``), to say where RSS growth lives.
+
+    ``heap``: the main malloc arena (``[heap]``); ``anon``: anonymous maps (other threads' malloc
+    arenas, Python's object arenas, large buffers); ``stack``: thread stacks; ``files``: mapped
+    libraries and files. Empty where smaps is unreadable.
+    """
+    kb = dict.fromkeys(MEMORY_KINDS, 0)
+    kind = "anon"
+    try:
+        text = Path(f"/proc/{pid}/smaps").read_text()
+    except OSError:
+        return {}
+    for line in text.splitlines():
+        head = line.split(maxsplit=5)
+        if head and "-" in head[0] and len(head) >= 5 and ":" not in head[0]:  # a mapping's first line
+            name = head[5] if len(head) > 5 else ""
+            kind = (
+                "heap"
+                if name == "[heap]"
+                else "stack"
+                if name.startswith("[stack")
+                else "files"
+                if name.startswith("/")
+                else "anon"
+            )
+        elif line.startswith("Rss:"):
+            kb[kind] += int(line.split()[1])
+    return {f"rss_{k}_mb": round(v / 1024.0, 3) for k, v in kb.items()}
 
 
 STATUS_KEYS = (
@@ -775,7 +810,11 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
             "jack_xruns_quiet_per_min": per_min(quiet, "jack_xruns"),
             "jack_xruns_load_per_min": per_min(loaded, "jack_xruns"),
         },
-        "growth": {key: growth(samples, key, args.warmup_seconds) for key in ("rss_mb", "fds", "threads")},
+        "growth": {
+            key: growth(samples, key, args.warmup_seconds)
+            for key in ("rss_mb", "fds", "threads", *(f"rss_{k}_mb" for k in MEMORY_KINDS))
+            if key in samples[0]
+        },
         "before_and_after": {  # serve alone: before any client connected, and after every client left
             "before": before_clients,
             "after": {k: final[k] for k in ("rss_mb", "fds", "threads", "cpu_s")},
@@ -835,7 +874,10 @@ def print_table(result: dict) -> None:
         f"{fmt(u['jack_xruns_quiet_per_min'])}, load {fmt(u['jack_xruns_load_per_min'])}"
     )
     print(f"\n{'after warmup':<12} {'first':>9} {'last':>9} {'min':>9} {'max':>9} {'growth/h':>10}")
-    for key, label in (("rss_mb", "RSS MB"), ("fds", "open files"), ("threads", "threads")):
+    rows = [("rss_mb", "RSS MB"), *((f"rss_{k}_mb", f" of it {k}") for k in MEMORY_KINDS)]
+    for key, label in (*rows, ("fds", "open files"), ("threads", "threads")):
+        if key not in result["growth"]:
+            continue
         g = result["growth"][key]
         if g["per_hour"] is None:
             print(f"{label:<12} (no samples after the first minute)")

@@ -714,6 +714,11 @@ static int Core_init(Core *self, PyObject *args, PyObject *kw) {
         PyErr_NoMemory();
         goto fail;
     }
+    /* Resident from the start: calloc's pages are mapped on first touch, so the schedule's pages
+     * would otherwise arrive one new record depth at a time (RSS creeping up, faults in the callback). */
+    vs_prefault(ring, (size_t)ring_cap * sizeof(cmd_t));
+    vs_prefault(heap, (size_t)sched_cap * sizeof(cmd_t));
+    vs_prefault(tap, (size_t)TAP_FRAMES * (size_t)nch * sizeof(float));
     /* Nothing below fails: store it all. */
     self->sig = sig;
     self->peaks_buf = pk;

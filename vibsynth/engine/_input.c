@@ -155,6 +155,7 @@ static int Ring_init(Ring *self, PyObject *args, PyObject *kw) {
         PyErr_NoMemory();
         return -1;
     }
+    vs_prefault(self->buf, (size_t)cap * (size_t)channels * sizeof(float)); /* no page faults in the input callback */
     return 0;
 }
 

@@ -47,6 +47,15 @@ static inline double vs_now_s(void) {
 #endif
 }
 
+/* Make every page of a fresh allocation resident now, so that a buffer's pages do not arrive one
+ * by one later, on a real-time thread, each time it is filled deeper than ever before (a volatile
+ * store per page: a plain memset of zeros may be folded into calloc, whose pages stay untouched). */
+static inline void vs_prefault(void *p, size_t n) {
+    volatile unsigned char *b = (volatile unsigned char *)p;
+    for (size_t i = 0; i < n; i += 4096) b[i] = 0;
+    if (n) b[n - 1] = 0;
+}
+
 /* PortAudio's PaStreamCallbackTimeInfo (portaudio.h), laid out here to need no PortAudio header. */
 typedef struct {
     double input_adc;   /* inputBufferAdcTime: when the block's first input frame was captured */

@@ -76,6 +76,7 @@ typedef int socklen_t;
 #include <time.h>
 typedef int sock_t;
 #endif
+#include "../../engine/_rt.h" /* after winsock2.h, which must come before windows.h */
 
 #define MAX_DATAGRAM 65536
 #define MAX_BATCH 256 /* datagrams read per poll() (then stop() is checked) */
@@ -173,16 +174,6 @@ typedef struct {
     uint8_t *scratch;
     int ready; /* __init__ succeeded: set once, last, and never cleared */
 } Receiver;
-
-static double now_s(void) {
-#ifdef _WIN32
-    return (double)GetTickCount64() / 1000.0;
-#else
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-#endif
-}
 
 static double wall_s(void) {
 #ifdef _WIN32
@@ -661,13 +652,13 @@ static PyObject *Receiver_deliver(Receiver *r, PyObject *arg) {
     int64_t seq = 0;
     queue_t *q = NULL;
     PyThreadState *ts = PyEval_SaveThread();
-    double end = now_s() + timeout;
+    double end = vs_now_s() + timeout;
     for (;;) {
         PyThread_acquire_lock(r->qlock, WAIT_LOCK);
         const queue_t *f = &r->q[r->fill];
         int items = f->n > 0, state = r->any_dirty || f->n_seen > 0;
         int finished = r->finished, over = finished || r->stop;
-        double now = now_s(), wait = end - now;
+        double now = vs_now_s(), wait = end - now;
         if (state && !items) { /* the fast path's state: at most every STATE_PERIOD_S (and at the end) */
             double due = r->last_flush + STATE_PERIOD_S - now;
             if (over || due <= 0.0) items = 1;
@@ -692,7 +683,7 @@ static PyObject *Receiver_deliver(Receiver *r, PyObject *arg) {
     }
     PyEval_RestoreThread(ts);
     if (hand) {
-        r->last_flush = now_s();
+        r->last_flush = vs_now_s();
         int any_state = q->n_seen > 0;
         for (int k = 0; k < 2 * MAXCH && !any_state; k++) any_state = ((const uint8_t *)r->snap_dirty)[k];
         if (any_state) hand_state(r, q, seq);
@@ -845,11 +836,16 @@ static int Receiver_init(Receiver *r, PyObject *args, PyObject *kw) {
         if (PyErr_Occurred()) return -1;
     }
     if (!r->scratch) r->scratch = malloc(MAX_DATAGRAM);
-    for (int k = 0; k < 2; k++) { /* the queues' pages are touched only when Python falls behind */
+    /* The queues' pages are touched here, once: left untouched, each one would become resident the
+     * first time Python fell that far behind, so the RSS would creep up with every new record depth
+     * and the receive thread would take the page faults. */
+    for (int k = 0; k < 2; k++) {
         queue_t *q = &r->q[k];
-        if (!q->items) q->items = malloc(QUEUE_MAX * sizeof(qitem_t));
-        if (!q->arena) q->arena = malloc(QUEUE_ARENA);
-        if (!q->seen) q->seen = malloc(MAX_SEEN * sizeof(seen_t));
+        if (!q->items && (q->items = malloc(QUEUE_MAX * sizeof(qitem_t))) != NULL)
+            vs_prefault(q->items, QUEUE_MAX * sizeof(qitem_t));
+        if (!q->arena && (q->arena = malloc(QUEUE_ARENA)) != NULL) vs_prefault(q->arena, QUEUE_ARENA);
+        if (!q->seen && (q->seen = malloc(MAX_SEEN * sizeof(seen_t))) != NULL)
+            vs_prefault(q->seen, MAX_SEEN * sizeof(seen_t));
         if (!q->items || !q->arena || !q->seen) break;
     }
     if (!r->qlock) r->qlock = PyThread_allocate_lock();
