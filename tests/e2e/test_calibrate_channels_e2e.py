@@ -5,7 +5,7 @@ its own simulated actuator (a JACK client in its own process, from
 :mod:`tests.e2e.test_calibrate_e2e`: a 2nd-order resonance, a sensitivity, seeded noise),
 which records what it does. The actuators differ by an octave in resonance and by +-6 dB in
 sensitivity. Their profiles are their **true** responses written as absolute profiles
-(measuring them with ``calibrate response --channels all`` is tested in test_calibrate_e2e.py
+(measuring them with ``calibrate response --channels all`` is tested in test_calibrate_e2e.py,
 and takes ~30 s more; its profiles are within 0.25 dB of these). With one profile for every
 channel (the engine before per-channel trims) the actuators feel ~13 dB and ~0.75 balance
 apart; with ``actuator.channel_profiles: sim-ch{n}`` the trims bring them together.
@@ -93,10 +93,9 @@ def test_one_serve_three_actuators_per_channel_profiles_feel_the_same(tmp_path):
     require_jack()
     basis = default_basis()
     write_true_profiles(tmp_path)
-    sims = [
-        SimulatedActuator(resonance_sos(f0, q, gain, FS), noise_rms=1e-5, seed=20 + k, channel=k + 1, input_index=0)
-        for k, (f0, q, gain) in enumerate(ACTUATORS)
-    ]
+    sims = SimulatedActuator.many(
+        [resonance_sos(f0, q, gain, FS) for f0, q, gain in ACTUATORS], noise_rms=1e-5, seed=20, input_index=0
+    )
     try:
         one = felt_by_each(tmp_path, sims, "--set", "actuator.profile=sim-ch2")
         each = felt_by_each(tmp_path, sims, "--set", "actuator.channel_profiles=sim-ch{n}")

@@ -16,6 +16,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -124,7 +125,10 @@ class SimulatedActuator:
 
     _count = 0
 
-    def __init__(self, sos: np.ndarray, *, noise_rms: float, seed: int, channel: int = 1, input_index: int = 1) -> None:
+    def __init__(
+        self, sos: np.ndarray, *, noise_rms: float, seed: int, channel: int = 1, input_index: int = 1, wait: bool = True
+    ) -> None:
+        """``wait=False``: return once the child is started; :meth:`wait_ready` before using it."""
         import jack
 
         SimulatedActuator._count += 1
@@ -138,7 +142,9 @@ class SimulatedActuator:
             stdout=subprocess.PIPE,
             text=True,
         )
-        assert self.proc.stdout is not None and self.proc.stdout.readline().strip() == "ready"
+        self._ready = False
+        if wait:
+            self.wait_ready()
         self.gaps = 0
         self.patch = jack.Client(
             f"{self.name}-patch", no_start_server=True, servername=os.environ.get("JACK_DEFAULT_SERVER")
@@ -152,6 +158,20 @@ class SimulatedActuator:
         self._stop = threading.Event()
         self._watch = threading.Thread(target=self._connect_loop, daemon=True)
         self._watch.start()
+
+    def wait_ready(self) -> None:
+        """Until the child's JACK client runs (numpy, scipy and jack take a few seconds to import)."""
+        if not self._ready:
+            assert self.proc.stdout is not None and self.proc.stdout.readline().strip() == "ready"
+            self._ready = True
+
+    @classmethod
+    def many(cls, soses: list[np.ndarray], **each: Any) -> list[SimulatedActuator]:
+        """One actuator per response, ``channel`` 1, 2, ...: their children start side by side."""
+        sims = [cls(sos, channel=k + 1, wait=False, **dict(each, seed=each["seed"] + k)) for k, sos in enumerate(soses)]
+        for sim in sims:
+            sim.wait_ready()
+        return sims
 
     def _connect_loop(self) -> None:
         connected = None
@@ -179,6 +199,7 @@ class SimulatedActuator:
 
     def record(self, seconds: float, path: Path) -> tuple[np.ndarray, int]:
         """The actuator's output over the next ``seconds`` (gap-free unless it says so): (samples, missed cycles)."""
+        self.wait_ready()
         assert self.proc.stdin is not None and self.proc.stdout is not None
         self.proc.stdin.write(f"record {int(seconds * self.fs)} {path}\n")
         self.proc.stdin.flush()
@@ -232,7 +253,7 @@ def test_simulated_actuator_measured_within_1_db_and_runs_agree(jack_ready, tmp_
     try:
         runs = []
         for k in range(3):
-            proc = calibrate(tmp_path, "--seconds", "2", "--sweeps", "3", name=f"run{k}")
+            proc = calibrate(tmp_path, "--seconds", "2", "--sweeps", "2", name=f"run{k}")
             assert proc.returncode == 0, proc.stderr
             runs.append(read_profile(tmp_path / f"run{k}.yaml"))
     finally:
@@ -300,31 +321,6 @@ if __name__ == "__main__":  # the simulated actuator's process (see SimulatedAct
 ACTUATORS = [(45.0, 2.0, -6.0), (65.0, 3.0, 0.0), (100.0, 4.0, 6.0)]
 
 
-def felt(tmp_path: Path, sim: SimulatedActuator, profile: str) -> np.ndarray:
-    """What the actuator does (its ``out``) while ``vibsynth serve`` plays intensity 0.8, balance +1 through it."""
-    cmd = [
-        sys.executable, "-m", "vibsynth", "serve", "--seconds", "60", "--no-osc", "--no-midi", "--no-studio",
-        "--set", "audio.host_api=JACK", "--set", f"actuator.profile={profile}", "--set", "actuator.max_boost_db=45",
-        "--set", "knobs.initial_intensity=0.8", "--set", "knobs.initial_balance=1.0",
-        "--set", "discovery.enabled=false",
-    ]  # fmt: skip
-    proc = subprocess.Popen(cmd, env=env_of(tmp_path), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    try:
-        deadline = time.monotonic() + 60
-        while not sim.patch.get_all_connections(f"{sim.name}:in"):
-            if proc.poll() is not None or time.monotonic() > deadline:
-                proc.kill()
-                raise AssertionError(f"serve did not start: {proc.communicate()[0].decode()[-2000:]}")
-            time.sleep(0.05)
-        time.sleep(1.0)  # past the start's fade
-        y, gaps = sim.record(4.0, tmp_path / f"felt-{profile}.npy")
-        print(f"{profile}: the simulated actuator missed {gaps} JACK cycles while recording")
-        return y
-    finally:
-        proc.terminate()
-        proc.wait(timeout=20)
-
-
 def uncalibrated(tmp_path: Path, sos: np.ndarray) -> np.ndarray:
     """What an actuator of response ``sos`` does with the flat profile's texture (intensity 0.8,
     balance +1): rendered once offline, then filtered by the response. The actuator is linear, so
@@ -346,40 +342,6 @@ def uncalibrated(tmp_path: Path, sos: np.ndarray) -> np.ndarray:
     # the texture loops seamlessly: the second of two periods is the actuator's steady state (the
     # first holds the filter's start-up transient, which alone moved the low bands by up to 11 dB)
     return signal.sosfilt(sos, np.tile(x, 2))[x.size :]
-
-
-def test_three_calibrated_actuators_feel_the_same(jack_ready, tmp_path):
-    from vibsynth.dsp.analysis import analyze
-    from vibsynth.dsp.intensity import intensity_level_db
-    from vibsynth.formats.basis_file import default_basis
-
-    basis = default_basis()
-    rows = []
-    for k, (f0, q, gain) in enumerate(ACTUATORS):
-        sos = resonance_sos(f0, q, gain, 48000.0)
-        sim = SimulatedActuator(sos, noise_rms=1e-5, seed=10 + k)
-        try:
-            proc = calibrate(tmp_path, "--seconds", "2", "--sweeps", "3", "--level", "-24", out=f"coil{k}")
-            assert proc.returncode == 0, proc.stderr
-            sim.input_index = 0
-            cal = felt(tmp_path, sim, f"coil{k}")
-        finally:
-            sim.close()
-        for name, y in (("uncalibrated", uncalibrated(tmp_path, sos)), ("calibrated", cal)):
-            a = analyze(y, fs=48000.0, basis=basis)
-            rows.append((k, name, intensity_level_db(y, fs=48000.0), a.balance))
-    for k, name, level, balance in rows:
-        print(f"actuator {ACTUATORS[k]}: {name:12s} 80-200 Hz level {level:7.2f} dB, balance {balance:+.3f}")
-    cal_levels = np.array([r[2] for r in rows if r[1] == "calibrated"])
-    cal_bal = np.array([r[3] for r in rows if r[1] == "calibrated"])
-    raw_levels = np.array([r[2] for r in rows if r[1] == "uncalibrated"])
-    raw_bal = np.array([r[3] for r in rows if r[1] == "uncalibrated"])
-    print(f"uncalibrated: levels {np.ptp(raw_levels):.2f} dB apart, balances {np.ptp(raw_bal):.2f} apart")
-    print(f"calibrated: levels within {np.abs(cal_levels - cal_levels.mean()).max():.3f} dB of their mean, "
-          f"balances within {np.abs(cal_bal - cal_bal.mean()).max():.3f}")  # fmt: skip
-    assert np.abs(cal_levels - cal_levels.mean()).max() <= 0.5
-    assert np.abs(cal_bal - cal_bal.mean()).max() <= 0.1
-    assert np.ptp(raw_levels) > 3.0 and np.ptp(raw_bal) > 0.3  # the test can tell: uncalibrated they differ
 
 
 def test_jack_server_lost_mid_sweep_one_message_no_profile(tmp_path):
@@ -418,32 +380,51 @@ def test_jack_server_lost_mid_sweep_one_message_no_profile(tmp_path):
     assert existing.read_bytes() == before
 
 
-def test_channels_all_measures_every_channel_with_its_own_profile(jack_ready, tmp_path):
-    sos = [resonance_sos(50.0, 2.0, -3.0, 48000.0), resonance_sos(120.0, 4.0, 3.0, 48000.0)]
-    sims = [SimulatedActuator(s, noise_rms=1e-4, seed=20 + k, channel=k + 1) for k, s in enumerate(sos)]
-    try:  # both actuators feed input 1 (JACK sums them); one channel plays at a time
+def test_three_actuators_measured_in_one_run_then_feel_the_same(jack_ready, tmp_path):
+    """``calibrate response --channels all`` measures three different actuators (one channel plays at a
+    time, all feed input 1: JACK sums them), each profile within 1 dB of its truth; then one serve with
+    ``actuator.channel_profiles: coil-ch{n}`` makes them feel the same, where the flat texture does not."""
+    from tests.e2e.test_calibrate_channels_e2e import felt_by_each
+    from vibsynth.dsp.analysis import analyze
+    from vibsynth.dsp.intensity import intensity_level_db
+    from vibsynth.formats.basis_file import default_basis
+
+    soses = [resonance_sos(f0, q, gain, 48000.0) for f0, q, gain in ACTUATORS]
+    sims = SimulatedActuator.many(soses, noise_rms=1e-5, seed=10)
+    try:
         proc = calibrate(
-            tmp_path,
-            "--channels",
-            "all",
-            "--set",
-            "audio.channels=2",
-            "--seconds",
-            "2",
-            "--sweeps",
-            "3",
-            "--level",
-            "-24",
-            out="vest",
-        )
+            tmp_path, "--channels", "all", "--set", f"audio.channels={len(sims)}",
+            "--seconds", "2", "--sweeps", "2", "--level", "-24", out="coil",
+        )  # fmt: skip
+        assert proc.returncode == 0, proc.stderr
+        for sim in sims:
+            sim.input_index = 0  # serve has no input: the actuators only record
+        felt = felt_by_each(tmp_path, sims, "--set", "actuator.channel_profiles=coil-ch{n}")
     finally:
         for sim in sims:
             sim.close()
-    assert proc.returncode == 0, proc.stderr
     f = np.geomspace(20, 800, 200)
     folder = tmp_path / "config" / "vibsynth" / "actuators"
-    for k, s in enumerate(sos):
-        pf, pdb, doc = read_profile(folder / f"vest-ch{k + 1}.yaml")
-        err = np.abs(fine_response(pf, pdb, f) - response_db(s, f, 48000.0)).max()
+    for k, sos in enumerate(soses):
+        pf, pdb, doc = read_profile(folder / f"coil-ch{k + 1}.yaml")
+        err = np.abs(fine_response(pf, pdb, f) - response_db(sos, f, 48000.0)).max()
         print(f"channel {k + 1}: max |error| 20-800 Hz {err:.3f} dB, band {doc['band_hz']}")
-        assert err <= 1.0 and doc["name"] == f"vest-ch{k + 1}" and doc["provenance"]["output_channel"] == k + 1
+        assert err <= 1.0 and doc["name"] == f"coil-ch{k + 1}" and doc["provenance"]["output_channel"] == k + 1
+    basis = default_basis()
+    rows = []
+    for k, sos in enumerate(soses):
+        for name, y in (("uncalibrated", uncalibrated(tmp_path, sos)), ("calibrated", felt[k])):
+            a = analyze(y, fs=48000.0, basis=basis)
+            rows.append((k, name, intensity_level_db(y, fs=48000.0), a.balance))
+    for k, name, level, balance in rows:
+        print(f"actuator {ACTUATORS[k]}: {name:12s} 80-200 Hz level {level:7.2f} dB, balance {balance:+.3f}")
+    cal_levels = np.array([r[2] for r in rows if r[1] == "calibrated"])
+    cal_bal = np.array([r[3] for r in rows if r[1] == "calibrated"])
+    raw_levels = np.array([r[2] for r in rows if r[1] == "uncalibrated"])
+    raw_bal = np.array([r[3] for r in rows if r[1] == "uncalibrated"])
+    print(f"uncalibrated: levels {np.ptp(raw_levels):.2f} dB apart, balances {np.ptp(raw_bal):.2f} apart")
+    print(f"calibrated: levels within {np.abs(cal_levels - cal_levels.mean()).max():.3f} dB of their mean, "
+          f"balances within {np.abs(cal_bal - cal_bal.mean()).max():.3f}")  # fmt: skip
+    assert np.abs(cal_levels - cal_levels.mean()).max() <= 0.5
+    assert np.abs(cal_bal - cal_bal.mean()).max() <= 0.1
+    assert np.ptp(raw_levels) > 3.0 and np.ptp(raw_bal) > 0.3  # the test can tell: uncalibrated they differ

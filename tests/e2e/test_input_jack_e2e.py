@@ -210,6 +210,10 @@ def test_an_input_beside_the_output_runs_every_callback(output):
     assert overflows == 0 and callbacks > 0.9 * ROUNDS * WINDOW_S * FS / 128
 
 
+#: Windows of the loop test: one JACK lost cycles in is measured again, up to this many in all.
+LOOP_ATTEMPTS = 5
+
+
 def test_a_loop_from_the_output_back_to_the_input_is_bit_exact_and_its_latency_measured(output):
     """Calibration's measurement loop, inside JACK: PortAudio:out_0 -> PortAudio:in_0.
 
@@ -219,30 +223,34 @@ def test_a_loop_from_the_output_back_to_the_input_is_bit_exact_and_its_latency_m
     """
     engine = output.engine
     engine.submit(SetKnob("intensity", 0.8, glide_s=0.0))
-    inp = SoundDeviceInput("system:1", fs=FS, host_api="JACK", block_size=128)
-    before = jack_ports()
-    inp.open_ports()
-    try:
-        (port,) = new_ports(before)
-        with JackPlayer(n_ports=1) as wiring:  # a client that only wires the loop
-            wiring.client.connect(portaudio_output_ports(wiring.client)[0], port)
-            inp.open()
-            time.sleep(0.5)
-            inp.ring.skip()
-            time.sleep(0.25)
-            first = inp.ring.frames_read
-            x = inp.ring.read()[:, 0]
-            tap = np.empty((32768, engine.channels), np.float32)
-            tap_end = engine._core.read_tap(tap)
-            offsets = [frame_offset(output_stamp(engine), inp.ring.stamp(), FS, device_times=False)]
-            for _ in range(20):
-                time.sleep(0.01)
-                offsets.append(frame_offset(output_stamp(engine), inp.ring.stamp(), FS, device_times=False))
-    finally:
-        inp.close()
-    assert inp.ring.dropped_frames == 0 and x.size > 0.2 * FS and np.abs(x).max() > 1e-3
-    if inp.ring.input_overflows:
-        pytest.skip(f"JACK lost {inp.ring.input_overflows} cycles (xruns) during the window: no exact loop to check")
+    for attempt in range(1, LOOP_ATTEMPTS + 1):  # a window JACK itself lost cycles in is measured again
+        inp = SoundDeviceInput("system:1", fs=FS, host_api="JACK", block_size=128)
+        before = jack_ports()
+        inp.open_ports()
+        try:
+            (port,) = new_ports(before)
+            with JackPlayer(n_ports=1) as wiring:  # a client that only wires the loop
+                wiring.client.connect(portaudio_output_ports(wiring.client)[0], port)
+                inp.open()
+                time.sleep(0.5)
+                inp.ring.skip()
+                time.sleep(0.25)
+                first = inp.ring.frames_read
+                x = inp.ring.read()[:, 0]
+                tap = np.empty((32768, engine.channels), np.float32)
+                tap_end = engine._core.read_tap(tap)
+                offsets = [frame_offset(output_stamp(engine), inp.ring.stamp(), FS, device_times=False)]
+                for _ in range(20):
+                    time.sleep(0.01)
+                    offsets.append(frame_offset(output_stamp(engine), inp.ring.stamp(), FS, device_times=False))
+        finally:
+            inp.close()
+        assert inp.ring.dropped_frames == 0 and x.size > 0.2 * FS and np.abs(x).max() > 1e-3
+        if not inp.ring.input_overflows:
+            break
+        print(f"\nwindow {attempt}: JACK lost {inp.ring.input_overflows} cycles (xruns): no exact loop, measured again")
+    else:
+        pytest.skip(f"JACK lost cycles (xruns) in each of {LOOP_ATTEMPTS} windows: no exact loop to check")
     y = tap[:, 0]
     y_first = tap_end - y.size  # output frame of y[0]
     # the lag D (input frame - output frame) at which the input is the output, bit for bit
