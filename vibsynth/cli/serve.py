@@ -134,6 +134,9 @@ def _settings(args: argparse.Namespace) -> VibsynthConfig:
 
 
 def run(args: argparse.Namespace) -> int:
+    from vibsynth.app.allocator import tune_allocator
+
+    tune_allocator()  # before serve's threads start: a long run's RSS follows what is in use
     from vibsynth.app.service import serve
 
     settings = _settings(args)
