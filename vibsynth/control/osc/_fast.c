@@ -357,7 +357,6 @@ static void log_seen(queue_t *q, const uint8_t *d, int n, const struct sockaddr_
     peer_of(addr, &s->peer);
 }
 
-/* One received, allowed datagram: into the engine (fast path) or into the queue for Python. */
 /* Wake deliver() (qlock held): at most once per hand-over, so a flood does not wake it per datagram. */
 static void post_locked(Receiver *r) {
     if (!r->wake_posted) {
@@ -366,6 +365,7 @@ static void post_locked(Receiver *r) {
     }
 }
 
+/* One received, allowed datagram: into the engine (fast path) or into the queue for Python. */
 static void take(Receiver *r, const uint8_t *d, int n, const struct sockaddr_storage *addr) {
     PyThread_acquire_lock(r->qlock, WAIT_LOCK);
     queue_t *q = &r->q[r->fill];
