@@ -22,13 +22,11 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.e2e.test_calibrate_e2e import REPO, SimulatedActuator, env_of, resonance_sos, response_db
+from tests.e2e.test_calibrate_e2e import ACTUATORS, REPO, SimulatedActuator, env_of, resonance_sos, response_db
 
 pytestmark = pytest.mark.e2e
 
 FS = 48000.0
-#: (resonance Hz, Q, sensitivity dB) of each channel's actuator.
-ACTUATORS = [(45.0, 2.0, -6.0), (65.0, 3.0, 0.0), (100.0, 4.0, 6.0)]
 #: Intensity 0.8 is -48 dB at the default mapping: the 80-200 Hz level every actuator should reach.
 KNOB_LEVEL_DB = -48.0
 
